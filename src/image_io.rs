@@ -1,0 +1,333 @@
+//! Writing and reading images, always through a temporary file in the
+//! destination folder that is renamed into place: an interrupted run never
+//! leaves a half-written file, and an existing file is either the old one
+//! or the complete new one.
+
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+
+use crate::color::{Rgb, srgb8_table, to_linear16, to_srgb8};
+
+/// Why an image could not be written or read.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ImageIoError {
+    /// An I/O error on a path.
+    #[error("{}: {source}", .path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// PNG encoding or decoding failed.
+    #[error("{}: {message}", .path.display())]
+    Png {
+        /// The file.
+        path: PathBuf,
+        /// What failed.
+        message: String,
+    },
+}
+
+/// Writes a file atomically: `write` fills a temporary file in the same
+/// folder, which is flushed, synced and renamed over `path`.
+///
+/// # Errors
+///
+/// [`ImageIoError::Io`] (the temporary file is removed).
+pub fn write_atomic<F>(path: &Path, write: F) -> Result<(), ImageIoError>
+where
+    F: FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
+{
+    let io = |source| ImageIoError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let name = path
+        .file_name()
+        .map_or_else(|| "out".into(), |n| n.to_string_lossy().into_owned());
+    let tmp = dir.join(format!(".{name}.{}.tmp", std::process::id()));
+    let result = (|| {
+        let file = File::create(&tmp)?;
+        let mut w = BufWriter::new(file);
+        write(&mut w)?;
+        w.flush()?;
+        w.get_ref().sync_all()?;
+        drop(w);
+        std::fs::rename(&tmp, path)
+    })();
+    if let Err(e) = result {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(io(e));
+    }
+    Ok(())
+}
+
+/// How a colour image is encoded.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PngEncoding {
+    /// 8-bit sRGB (with an sRGB chunk).
+    Srgb8,
+    /// 16-bit linear with a gAMA chunk of 1.0.
+    Linear16,
+}
+
+fn png_err(path: &Path, e: impl std::fmt::Display) -> ImageIoError {
+    ImageIoError::Png {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    }
+}
+
+/// Encodes linear colours (row-major from the top) as PNG bytes.
+///
+/// # Errors
+///
+/// [`ImageIoError::Png`] if the encoder fails.
+pub fn encode_png(
+    width: u32,
+    height: u32,
+    pixels: &[Rgb],
+    encoding: PngEncoding,
+) -> Result<Vec<u8>, ImageIoError> {
+    let mut out = Vec::new();
+    let p = Path::new("<memory>");
+    {
+        let mut enc = png::Encoder::new(&mut out, width, height);
+        enc.set_color(png::ColorType::Rgb);
+        let data: Vec<u8> = match encoding {
+            PngEncoding::Srgb8 => {
+                enc.set_depth(png::BitDepth::Eight);
+                enc.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
+                pixels
+                    .iter()
+                    .flat_map(|c| [to_srgb8(c.r), to_srgb8(c.g), to_srgb8(c.b)])
+                    .collect()
+            }
+            PngEncoding::Linear16 => {
+                enc.set_depth(png::BitDepth::Sixteen);
+                enc.set_source_gamma(png::ScaledFloat::new(1.0));
+                pixels
+                    .iter()
+                    .flat_map(|c| [to_linear16(c.r), to_linear16(c.g), to_linear16(c.b)])
+                    .flat_map(u16::to_be_bytes)
+                    .collect()
+            }
+        };
+        let mut w = enc.write_header().map_err(|e| png_err(p, e))?;
+        w.write_image_data(&data).map_err(|e| png_err(p, e))?;
+    }
+    Ok(out)
+}
+
+/// Writes a colour image.
+///
+/// # Errors
+///
+/// [`ImageIoError`] on encoding or I/O failure.
+pub fn write_png(
+    path: &Path,
+    width: u32,
+    height: u32,
+    pixels: &[Rgb],
+    encoding: PngEncoding,
+) -> Result<(), ImageIoError> {
+    let bytes = encode_png(width, height, pixels, encoding).map_err(|e| match e {
+        ImageIoError::Png { message, .. } => png_err(path, message),
+        other => other,
+    })?;
+    write_atomic(path, |w| w.write_all(&bytes))
+}
+
+/// Writes RGBA8 pixels given as little-endian u32 words (R the low byte).
+///
+/// # Errors
+///
+/// [`ImageIoError`] on encoding or I/O failure.
+pub fn write_png_u32(
+    path: &Path,
+    width: u32,
+    height: u32,
+    words: &[u32],
+) -> Result<(), ImageIoError> {
+    let mut out = Vec::new();
+    {
+        let mut enc = png::Encoder::new(&mut out, width, height);
+        enc.set_color(png::ColorType::Rgba);
+        enc.set_depth(png::BitDepth::Eight);
+        let data: Vec<u8> = words.iter().flat_map(|w| w.to_le_bytes()).collect();
+        let mut w = enc.write_header().map_err(|e| png_err(path, e))?;
+        w.write_image_data(&data).map_err(|e| png_err(path, e))?;
+    }
+    write_atomic(path, |w| w.write_all(&out))
+}
+
+/// Writes RGBA8 pixels.
+///
+/// # Errors
+///
+/// [`ImageIoError`] on encoding or I/O failure.
+pub fn write_png_rgba8(
+    path: &Path,
+    width: u32,
+    height: u32,
+    rgba: &[u8],
+) -> Result<(), ImageIoError> {
+    let mut out = Vec::new();
+    {
+        let mut enc = png::Encoder::new(&mut out, width, height);
+        enc.set_color(png::ColorType::Rgba);
+        enc.set_depth(png::BitDepth::Eight);
+        let mut w = enc.write_header().map_err(|e| png_err(path, e))?;
+        w.write_image_data(rgba).map_err(|e| png_err(path, e))?;
+    }
+    write_atomic(path, |w| w.write_all(&out))
+}
+
+/// Writes a single-channel float image as PFM (grey, little-endian, rows
+/// bottom to top as the format requires).
+///
+/// # Errors
+///
+/// [`ImageIoError::Io`].
+pub fn write_pfm(path: &Path, width: u32, height: u32, values: &[f32]) -> Result<(), ImageIoError> {
+    write_atomic(path, |w| {
+        write!(w, "Pf\n{width} {height}\n-1.0\n")?;
+        for row in (0..height as usize).rev() {
+            let start = row * width as usize;
+            for v in &values[start..start + width as usize] {
+                w.write_all(&v.to_le_bytes())?;
+            }
+        }
+        Ok(())
+    })
+}
+
+/// A decoded image in linear floats.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LinearImage {
+    /// Width.
+    pub width: u32,
+    /// Height.
+    pub height: u32,
+    /// Pixels, row-major from the top.
+    pub pixels: Vec<Rgb>,
+    /// `true` when the file was 16-bit with gAMA 1.0 (read as linear).
+    pub linear16: bool,
+}
+
+/// Reads a PNG as linear colour: 16-bit with a gAMA chunk of 1.0 is
+/// linear (`v/65535`), anything else is sRGB (DESIGN.md §5).
+///
+/// # Errors
+///
+/// [`ImageIoError`] when the file is unreadable or not a PNG.
+pub fn read_png_linear(path: &Path) -> Result<LinearImage, ImageIoError> {
+    let bytes = std::fs::read(path).map_err(|source| ImageIoError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    decode_png_linear(path, &bytes)
+}
+
+/// Decodes PNG bytes as [`read_png_linear`] does.
+///
+/// # Errors
+///
+/// [`ImageIoError::Png`] when the bytes are not a PNG.
+pub fn decode_png_linear(path: &Path, bytes: &[u8]) -> Result<LinearImage, ImageIoError> {
+    let mut dec = png::Decoder::new(std::io::Cursor::new(bytes));
+    dec.set_transformations(png::Transformations::EXPAND);
+    let mut reader = dec.read_info().map_err(|e| png_err(path, e))?;
+    let info = reader.info();
+    let gamma_one = info
+        .gama_chunk
+        .or(info.source_gamma)
+        .is_some_and(|g| (g.into_value() - 1.0).abs() < 1e-4);
+    let mut buf = vec![
+        0u8;
+        reader
+            .output_buffer_size()
+            .ok_or_else(|| png_err(path, "image too large"))?
+    ];
+    let frame = reader.next_frame(&mut buf).map_err(|e| png_err(path, e))?;
+    let (w, h) = (frame.width, frame.height);
+    let channels = frame.color_type.samples();
+    let sixteen = frame.bit_depth == png::BitDepth::Sixteen;
+    let linear16 = sixteen && gamma_one;
+    let table = srgb8_table();
+    let n = (w as usize) * (h as usize);
+    let mut pixels = Vec::with_capacity(n);
+    let sample = |i: usize| -> f32 {
+        if sixteen {
+            let v = u16::from_be_bytes([buf[2 * i], buf[2 * i + 1]]);
+            let x = f32::from(v) / 65535.0;
+            if linear16 {
+                x
+            } else {
+                crate::color::srgb_decode(x)
+            }
+        } else {
+            table[usize::from(buf[i])]
+        }
+    };
+    for p in 0..n {
+        let base = p * channels;
+        let c = match channels {
+            1 | 2 => {
+                let v = sample(base);
+                Rgb::splat(v)
+            }
+            _ => Rgb::new(sample(base), sample(base + 1), sample(base + 2)),
+        };
+        pixels.push(c);
+    }
+    Ok(LinearImage {
+        width: w,
+        height: h,
+        pixels,
+        linear16,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn linear16_round_trips_and_is_recognised() {
+        let dir = std::env::temp_dir().join(format!("rendiff-io-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let px = vec![Rgb::new(0.0, 0.5, 1.0), Rgb::new(0.25, 0.125, 0.75)];
+        let p16 = dir.join("a.png");
+        write_png(&p16, 2, 1, &px, PngEncoding::Linear16).unwrap();
+        let img = read_png_linear(&p16).unwrap();
+        assert!(img.linear16);
+        for (a, b) in img.pixels.iter().zip(&px) {
+            assert!(a.max_abs_diff(*b) <= 0.5 / 65535.0 + 1e-7);
+        }
+        let p8 = dir.join("b.png");
+        write_png(&p8, 2, 1, &px, PngEncoding::Srgb8).unwrap();
+        let img = read_png_linear(&p8).unwrap();
+        assert!(!img.linear16);
+        // 8-bit sRGB: the round trip is within half a code, ≤ 1/255 × slope.
+        for (a, b) in img.pixels.iter().zip(&px) {
+            assert!(a.max_abs_diff(*b) < 0.01, "{a:?} {b:?}");
+        }
+        // No temporary files are left behind.
+        let leftovers: Vec<_> = std::fs::read_dir(&dir)
+            .unwrap()
+            .filter_map(Result::ok)
+            .filter(|e| e.file_name().to_string_lossy().ends_with(".tmp"))
+            .collect();
+        assert!(leftovers.is_empty());
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}

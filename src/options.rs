@@ -1,0 +1,183 @@
+//! Render settings shared by the scene file, the command line and the
+//! backends: the named conventions of DESIGN.md §4–§5 as enums, never as
+//! booleans.
+
+use std::fmt;
+use std::str::FromStr;
+
+/// Format of the rasterizer's depth buffer (DESIGN.md §2).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum DepthFormat {
+    /// `f32` reversed-Z (perspective stores near/z).
+    #[default]
+    F32,
+    /// 24-bit unsigned normalised.
+    U24,
+    /// 16-bit unsigned normalised.
+    U16,
+}
+
+impl DepthFormat {
+    /// Bits of an integer format (`None` for f32).
+    #[must_use]
+    pub fn bits(self) -> Option<u32> {
+        match self {
+            DepthFormat::F32 => None,
+            DepthFormat::U24 => Some(24),
+            DepthFormat::U16 => Some(16),
+        }
+    }
+}
+
+impl fmt::Display for DepthFormat {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            DepthFormat::F32 => "f32",
+            DepthFormat::U24 => "u24",
+            DepthFormat::U16 => "u16",
+        })
+    }
+}
+
+impl FromStr for DepthFormat {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "f32" => Ok(DepthFormat::F32),
+            "u24" => Ok(DepthFormat::U24),
+            "u16" => Ok(DepthFormat::U16),
+            _ => Err(format!("expected \"f32\", \"u24\" or \"u16\", got \"{s}\"")),
+        }
+    }
+}
+
+/// How the rasterizer answers shadow rays.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum ShadowMode {
+    /// The same shadow rays as the ray tracer (hybrid).
+    #[default]
+    Rays,
+    /// A shadow map of the given resolution per light.
+    Map(u32),
+}
+
+impl ShadowMode {
+    /// Smallest shadow-map resolution.
+    pub const MIN_RES: u32 = 64;
+    /// Largest shadow-map resolution.
+    pub const MAX_RES: u32 = 16_384;
+}
+
+impl fmt::Display for ShadowMode {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            ShadowMode::Rays => f.write_str("rays"),
+            ShadowMode::Map(r) => write!(f, "map:{r}"),
+        }
+    }
+}
+
+impl FromStr for ShadowMode {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        if s == "rays" {
+            return Ok(ShadowMode::Rays);
+        }
+        if let Some(r) = s.strip_prefix("map:") {
+            let res: u32 = r
+                .parse()
+                .map_err(|_| format!("expected \"map:RES\" with an integer RES, got \"{s}\""))?;
+            if !(Self::MIN_RES..=Self::MAX_RES).contains(&res) {
+                return Err(format!(
+                    "shadow map resolution {res} is outside {} … {}",
+                    Self::MIN_RES,
+                    Self::MAX_RES
+                ));
+            }
+            return Ok(ShadowMode::Map(res));
+        }
+        Err(format!("expected \"rays\" or \"map:RES\", got \"{s}\""))
+    }
+}
+
+/// Whether the ray tracer uses a BVH.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum BvhMode {
+    /// Decided by the render plan (a flat loop for tiny scenes).
+    #[default]
+    Auto,
+    /// Always a BVH.
+    On,
+    /// Always a flat loop.
+    Off,
+}
+
+impl fmt::Display for BvhMode {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            BvhMode::Auto => "auto",
+            BvhMode::On => "on",
+            BvhMode::Off => "off",
+        })
+    }
+}
+
+impl FromStr for BvhMode {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "auto" => Ok(BvhMode::Auto),
+            "on" => Ok(BvhMode::On),
+            "off" => Ok(BvhMode::Off),
+            _ => Err(format!("expected \"auto\", \"on\" or \"off\", got \"{s}\"")),
+        }
+    }
+}
+
+/// What geometry the ray tracer intersects.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum Geometry {
+    /// The triangles every backend sees.
+    #[default]
+    Mesh,
+    /// Analytic shapes where the ray tracer has them (spheres).
+    Analytic,
+}
+
+impl fmt::Display for Geometry {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Geometry::Mesh => "mesh",
+            Geometry::Analytic => "analytic",
+        })
+    }
+}
+
+impl FromStr for Geometry {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "mesh" => Ok(Geometry::Mesh),
+            "analytic" => Ok(Geometry::Analytic),
+            _ => Err(format!("expected \"mesh\" or \"analytic\", got \"{s}\"")),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn settings_round_trip_through_text() {
+        for s in ["f32", "u24", "u16"] {
+            assert_eq!(s.parse::<DepthFormat>().unwrap().to_string(), s);
+        }
+        for s in ["rays", "map:64", "map:2048"] {
+            assert_eq!(s.parse::<ShadowMode>().unwrap().to_string(), s);
+        }
+        assert!("map:63".parse::<ShadowMode>().is_err());
+        assert!("map:x".parse::<ShadowMode>().is_err());
+        assert!("f16".parse::<DepthFormat>().is_err());
+    }
+}

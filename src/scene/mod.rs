@@ -1,0 +1,1269 @@
+//! The scene file (DESIGN.md §4): parsing, validation, and the validated
+//! [`Scene`] that tessellation turns into a `TriScene`.
+//!
+//! Loading is strict: unknown keys, missing required keys, values of the
+//! wrong type, NaN or infinite numbers, values outside their rule, unknown
+//! material names, unreadable or malformed meshes and images are all
+//! errors that name the file, the line and column (or the mesh line) and
+//! what was expected. A [`Scene`] that exists is valid; nothing after this
+//! module re-checks what is checked here.
+
+mod error;
+pub mod obj;
+mod reader;
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+pub use error::{LoadError, Loc};
+pub use obj::{MeshData, MeshTri};
+
+use reader::{At, Source, Table};
+use toml::de::{DeTable, DeValue};
+
+use crate::color::Rgb;
+use crate::math::{DVec3, Transform, TransformStep, Vec3, to_f32};
+use crate::options::{BvhMode, DepthFormat, Geometry, ShadowMode};
+use crate::polygon::{self, PolygonOptions};
+use crate::shade::{Bump, BumpMethod, Light, LightKind, Material, Pigment};
+use crate::texture::Texture;
+
+/// Largest image side (DESIGN.md §4).
+pub const MAX_IMAGE_SIDE: u32 = 16_384;
+
+/// `[image]`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ImageSettings {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Background colour.
+    pub background: Rgb,
+    /// Samples per pixel side (1, 2, 4, 8 or 16).
+    pub samples: u32,
+}
+
+/// The projection as written in the scene.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ProjectionDesc {
+    /// Perspective with a vertical field of view in degrees.
+    Perspective {
+        /// `fov_y` in degrees.
+        fov_y_deg: f64,
+    },
+    /// Orthographic with the view height in world units.
+    Orthographic {
+        /// `view_height`.
+        view_height: f64,
+    },
+}
+
+/// `[camera]`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CameraSettings {
+    /// Projection.
+    pub projection: ProjectionDesc,
+    /// Eye position.
+    pub eye: DVec3,
+    /// Target.
+    pub look_at: DVec3,
+    /// Up hint.
+    pub up: DVec3,
+    /// Near distance.
+    pub near: f64,
+    /// Far distance (`None`: from the scene bounds).
+    pub far: Option<f64>,
+}
+
+/// `[render]`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RenderSettings {
+    /// `ambient_light`.
+    pub ambient_light: Rgb,
+    /// `max_depth` (POV-Ray's `max_trace_level`).
+    pub max_depth: u32,
+    /// Tessellation error in pixels.
+    pub tessellation_error: f64,
+}
+
+/// `[raster]`.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct RasterSettings {
+    /// Depth buffer format.
+    pub depth: DepthFormat,
+    /// Shadow mode.
+    pub shadows: ShadowMode,
+}
+
+/// `[ray]`.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct RaySettings {
+    /// BVH use.
+    pub bvh: BvhMode,
+    /// Geometry.
+    pub geometry: Geometry,
+}
+
+/// A number from the scene file with its position (for errors raised
+/// later, such as a tolerance looser than the derived one).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Located {
+    /// The value.
+    pub value: f64,
+    /// Where it was written.
+    pub loc: Loc,
+}
+
+/// `[tolerance]`: may only tighten the derived tolerances.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ToleranceSettings {
+    /// `shading_max`.
+    pub shading_max: Option<Located>,
+    /// `pov_max8`.
+    pub pov_max8: Option<Located>,
+    /// `pov_fraction`.
+    pub pov_fraction: Option<Located>,
+}
+
+/// A polygon: outline and holes, validated and triangulated.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PolygonShape {
+    /// All points, outline first, then each hole.
+    pub points: Vec<DVec3>,
+    /// Number of points of the outline and of each hole.
+    pub ring_sizes: Vec<usize>,
+    /// One uv per point, if given.
+    pub uv: Option<Vec<[f64; 2]>>,
+    /// Triangles (indices into `points`), counter-clockwise around `normal`.
+    pub triangles: Vec<[u32; 3]>,
+    /// Unit Newell normal.
+    pub normal: DVec3,
+}
+
+/// The geometry of an object, in its own space.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Shape {
+    /// A triangle mesh from an OBJ file.
+    Mesh {
+        /// The loaded mesh (shared between objects using the same file).
+        data: Arc<MeshData>,
+        /// Interpolate vertex normals.
+        smooth: bool,
+    },
+    /// A sphere.
+    Sphere {
+        /// Centre.
+        center: DVec3,
+        /// Radius.
+        radius: f64,
+    },
+    /// An axis-aligned box.
+    Box {
+        /// Lower corner.
+        min: DVec3,
+        /// Upper corner.
+        max: DVec3,
+    },
+    /// A planar polygon with holes.
+    Polygon(Arc<PolygonShape>),
+    /// POV-Ray's superellipsoid `<e, n>` in [−1, 1]³.
+    Superellipsoid {
+        /// East-west exponent (x-y plane).
+        e: f64,
+        /// North-south exponent (z).
+        n: f64,
+    },
+}
+
+impl Shape {
+    /// The kind as written in the scene file.
+    #[must_use]
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Shape::Mesh { .. } => "mesh",
+            Shape::Sphere { .. } => "sphere",
+            Shape::Box { .. } => "box",
+            Shape::Polygon(_) => "polygon",
+            Shape::Superellipsoid { .. } => "superellipsoid",
+        }
+    }
+
+    /// `true` for shapes whose tessellation is closed by construction.
+    #[must_use]
+    pub fn is_closed_by_construction(&self) -> bool {
+        matches!(
+            self,
+            Shape::Sphere { .. } | Shape::Box { .. } | Shape::Superellipsoid { .. }
+        )
+    }
+}
+
+/// One `[[objects]]` entry.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Object {
+    /// Index in the scene's object list.
+    pub index: usize,
+    /// Where the entry starts in the scene file.
+    pub loc: Loc,
+    /// The geometry.
+    pub shape: Shape,
+    /// Material index.
+    pub material: u16,
+    /// The transform steps as written.
+    pub steps: Vec<TransformStep>,
+    /// Their composition.
+    pub transform: Transform,
+    /// Casts no shadows.
+    pub no_shadow: bool,
+    /// Fixed segment count (spheres, superellipsoids).
+    pub tessellation: Option<u32>,
+}
+
+impl Object {
+    /// `objects[i] (kind)`, for messages.
+    #[must_use]
+    pub fn label(&self) -> String {
+        format!("objects[{}] ({})", self.index, self.shape.kind())
+    }
+}
+
+/// A validated scene.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Scene {
+    /// The scene file.
+    pub path: PathBuf,
+    /// `[image]`.
+    pub image: ImageSettings,
+    /// `[camera]`.
+    pub camera: CameraSettings,
+    /// `[render]`.
+    pub render: RenderSettings,
+    /// `[[lights]]`.
+    pub lights: Vec<Light>,
+    /// `[materials]`, in name order.
+    pub materials: Vec<Material>,
+    /// `[[objects]]`.
+    pub objects: Vec<Object>,
+    /// `[raster]`.
+    pub raster: RasterSettings,
+    /// `[ray]`.
+    pub ray: RaySettings,
+    /// `[tolerance]`.
+    pub tolerance: ToleranceSettings,
+}
+
+impl Scene {
+    /// The scene's name: the file stem.
+    #[must_use]
+    pub fn name(&self) -> String {
+        self.path
+            .file_stem()
+            .map_or_else(|| "scene".to_string(), |s| s.to_string_lossy().into_owned())
+    }
+
+    /// Loads and validates a scene file.
+    ///
+    /// # Errors
+    ///
+    /// [`LoadError`] naming the file, the place and what was expected.
+    pub fn load(path: &Path) -> Result<Scene, LoadError> {
+        let bytes = std::fs::read(path).map_err(|source| LoadError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let text = String::from_utf8(bytes).map_err(|e| LoadError::Scene {
+            path: path.to_path_buf(),
+            message: format!(
+                "not valid UTF-8 (byte {}); a scene file is TOML text",
+                e.utf8_error().valid_up_to()
+            ),
+        })?;
+        Scene::from_str(path, &text)
+    }
+
+    /// Parses and validates scene text; `path` locates relative files and
+    /// names the scene in errors.
+    ///
+    /// # Errors
+    ///
+    /// [`LoadError`] naming the place and what was expected.
+    pub fn from_str(path: &Path, text: &str) -> Result<Scene, LoadError> {
+        let src = Source { path, text };
+        let doc = DeTable::parse(text).map_err(|e| LoadError::Syntax {
+            path: path.to_path_buf(),
+            loc: src.loc(e.span().map_or(0, |s| s.start)),
+            message: e.message().trim().to_string(),
+        })?;
+        let span = doc.span();
+        let root = Table::new(&src, String::new(), doc.get_ref(), span);
+        let base = path.parent().map(Path::to_path_buf).unwrap_or_default();
+        Loader {
+            base,
+            textures: HashMap::new(),
+            meshes: HashMap::new(),
+        }
+        .scene(&root)
+    }
+}
+
+struct Loader {
+    base: PathBuf,
+    textures: HashMap<PathBuf, Arc<Texture>>,
+    meshes: HashMap<PathBuf, Arc<MeshData>>,
+}
+
+fn rgb_of(v: DVec3) -> Rgb {
+    let c = to_f32(v);
+    Rgb::new(c.x, c.y, c.z)
+}
+
+fn check_nonneg_rgb(t: &Table<'_, '_>, key: &'static str, v: &At<DVec3>) -> Result<(), LoadError> {
+    if v.value.min_element() < 0.0 {
+        return Err(t.err(&v.span, key, "expected a colour with every channel ≥ 0"));
+    }
+    if v.value.max_element() > f64::from(f32::MAX) {
+        return Err(t.err(&v.span, key, "colour channel exceeds the f32 range"));
+    }
+    Ok(())
+}
+
+/// Coordinates must stay far from f32 overflow: squares and cross products
+/// of them are formed in f32 by the renderers (DESIGN.md §8).
+pub const MAX_COORDINATE: f64 = 1e15;
+
+fn check_coord(t: &Table<'_, '_>, key: &'static str, v: &At<DVec3>) -> Result<(), LoadError> {
+    if v.value.abs().max_element() > MAX_COORDINATE {
+        return Err(t.err(
+            &v.span,
+            key,
+            format!(
+                "coordinates must be within ±{MAX_COORDINATE:e} (f32 arithmetic would overflow)"
+            ),
+        ));
+    }
+    Ok(())
+}
+
+impl Loader {
+    fn resolve(&self, file: &str) -> PathBuf {
+        let p = Path::new(file);
+        if p.is_absolute() {
+            p.to_path_buf()
+        } else {
+            self.base.join(p)
+        }
+    }
+
+    fn texture(
+        &mut self,
+        t: &Table<'_, '_>,
+        key: &'static str,
+        file: &At<String>,
+    ) -> Result<Arc<Texture>, LoadError> {
+        let path = self.resolve(&file.value);
+        if let Some(tex) = self.textures.get(&path) {
+            return Ok(tex.clone());
+        }
+        let bytes = std::fs::read(&path).map_err(|e| {
+            t.err(
+                &file.span,
+                key,
+                format!("could not read image {}: {e}", path.display()),
+            )
+        })?;
+        let tex = Texture::from_png_bytes(&path, &bytes).map_err(|e| LoadError::Image {
+            path: path.clone(),
+            message: e.message,
+        })?;
+        let tex = Arc::new(tex);
+        self.textures.insert(path, tex.clone());
+        Ok(tex)
+    }
+
+    fn scene(mut self, root: &Table<'_, '_>) -> Result<Scene, LoadError> {
+        let path = root.path().to_path_buf();
+        let image = self.image(root)?;
+        let camera = self.camera(root)?;
+        let render = self.render(root)?;
+        let lights = self.lights(root)?;
+        let (materials, names) = self.materials(root)?;
+        let objects = self.objects(root, &materials, &names)?;
+        let raster = self.raster(root)?;
+        let ray = self.ray(root)?;
+        let tolerance = self.tolerance(root)?;
+        root.finish()?;
+        if objects.is_empty() {
+            return Err(LoadError::Scene {
+                path,
+                message: "the scene has no objects; add at least one [[objects]] entry".into(),
+            });
+        }
+        Ok(Scene {
+            path,
+            image,
+            camera,
+            render,
+            lights,
+            materials,
+            objects,
+            raster,
+            ray,
+            tolerance,
+        })
+    }
+
+    fn image(&mut self, root: &Table<'_, '_>) -> Result<ImageSettings, LoadError> {
+        let t = root.table("image")?.ok_or_else(|| root.missing("image"))?;
+        let side = |key: &'static str| -> Result<u32, LoadError> {
+            let v = t.int(key)?.ok_or_else(|| t.missing(key))?;
+            u32::try_from(v.value)
+                .ok()
+                .filter(|s| (1..=MAX_IMAGE_SIDE).contains(s))
+                .ok_or_else(|| {
+                    t.err(
+                        &v.span,
+                        key,
+                        format!("expected 1 … {MAX_IMAGE_SIDE}, got {}", v.value),
+                    )
+                })
+        };
+        let width = side("width")?;
+        let height = side("height")?;
+        let background = match t.vec3("background")? {
+            Some(v) => {
+                check_nonneg_rgb(&t, "background", &v)?;
+                rgb_of(v.value)
+            }
+            None => Rgb::BLACK,
+        };
+        let samples = match t.int("samples")? {
+            Some(v) => u32::try_from(v.value)
+                .ok()
+                .filter(|s| [1, 2, 4, 8, 16].contains(s))
+                .ok_or_else(|| {
+                    t.err(
+                        &v.span,
+                        "samples",
+                        format!("expected 1, 2, 4, 8 or 16, got {}", v.value),
+                    )
+                })?,
+            None => 1,
+        };
+        t.finish()?;
+        Ok(ImageSettings {
+            width,
+            height,
+            background,
+            samples,
+        })
+    }
+
+    fn camera(&mut self, root: &Table<'_, '_>) -> Result<CameraSettings, LoadError> {
+        let t = root
+            .table("camera")?
+            .ok_or_else(|| root.missing("camera"))?;
+        let projection = match t.string("projection")? {
+            None => "perspective".to_string(),
+            Some(p) if p.value == "perspective" || p.value == "orthographic" => p.value,
+            Some(p) => {
+                return Err(t.err(
+                    &p.span,
+                    "projection",
+                    format!(
+                        "expected \"perspective\" or \"orthographic\", got \"{}\"",
+                        p.value
+                    ),
+                ));
+            }
+        };
+        let eye = t.req_vec3("eye")?;
+        check_coord(&t, "eye", &eye)?;
+        let look_at = t.req_vec3("look_at")?;
+        check_coord(&t, "look_at", &look_at)?;
+        let up = t.req_vec3("up")?;
+        let fov = t.f64("fov_y")?;
+        let vh = t.f64("view_height")?;
+        let projection = if projection == "perspective" {
+            if let Some(v) = vh {
+                return Err(t.err(
+                    &v.span,
+                    "view_height",
+                    "only for projection = \"orthographic\"",
+                ));
+            }
+            let fov = fov.ok_or_else(|| t.missing("fov_y"))?;
+            if !(fov.value > 0.0 && fov.value < 180.0) {
+                return Err(t.err(
+                    &fov.span,
+                    "fov_y",
+                    format!("expected 0 < fov_y < 180 (degrees), got {}", fov.value),
+                ));
+            }
+            ProjectionDesc::Perspective {
+                fov_y_deg: fov.value,
+            }
+        } else {
+            if let Some(v) = fov {
+                return Err(t.err(&v.span, "fov_y", "only for projection = \"perspective\""));
+            }
+            let vh = vh.ok_or_else(|| t.missing("view_height"))?;
+            if vh.value <= 0.0 {
+                return Err(t.err(
+                    &vh.span,
+                    "view_height",
+                    format!("expected > 0, got {}", vh.value),
+                ));
+            }
+            ProjectionDesc::Orthographic {
+                view_height: vh.value,
+            }
+        };
+        let f = look_at.value - eye.value;
+        if f.length() == 0.0 {
+            return Err(t.err(
+                &look_at.span,
+                "look_at",
+                "look_at equals eye; the view direction is undefined",
+            ));
+        }
+        let f = f.normalize();
+        if up.value.length() == 0.0 || f.cross(up.value).length() <= 1e-9 * up.value.length() {
+            return Err(t.err(
+                &up.span,
+                "up",
+                "up is zero or parallel to the view direction (look_at − eye)",
+            ));
+        }
+        let near = match t.f64("near")? {
+            Some(n) if n.value > 0.0 => n.value,
+            Some(n) => {
+                return Err(t.err(&n.span, "near", format!("expected > 0, got {}", n.value)));
+            }
+            None => 0.01,
+        };
+        let far = match t.f64("far")? {
+            Some(f) if f.value > near => Some(f.value),
+            Some(f) => {
+                return Err(t.err(
+                    &f.span,
+                    "far",
+                    format!("expected far > near ({near}), got {}", f.value),
+                ));
+            }
+            None => None,
+        };
+        t.finish()?;
+        Ok(CameraSettings {
+            projection,
+            eye: eye.value,
+            look_at: look_at.value,
+            up: up.value,
+            near,
+            far,
+        })
+    }
+
+    fn render(&mut self, root: &Table<'_, '_>) -> Result<RenderSettings, LoadError> {
+        let mut r = RenderSettings {
+            ambient_light: Rgb::WHITE,
+            max_depth: 5,
+            tessellation_error: 0.25,
+        };
+        let Some(t) = root.table("render")? else {
+            return Ok(r);
+        };
+        if let Some(v) = t.vec3("ambient_light")? {
+            check_nonneg_rgb(&t, "ambient_light", &v)?;
+            r.ambient_light = rgb_of(v.value);
+        }
+        if let Some(v) = t.int("max_depth")? {
+            r.max_depth = u32::try_from(v.value)
+                .ok()
+                .filter(|d| (1..=64).contains(d))
+                .ok_or_else(|| {
+                    t.err(
+                        &v.span,
+                        "max_depth",
+                        format!("expected 1 … 64, got {}", v.value),
+                    )
+                })?;
+        }
+        if let Some(v) = t.f64("tessellation_error")? {
+            if v.value <= 0.0 {
+                return Err(t.err(
+                    &v.span,
+                    "tessellation_error",
+                    format!("expected > 0 (pixels), got {}", v.value),
+                ));
+            }
+            r.tessellation_error = v.value;
+        }
+        t.finish()?;
+        Ok(r)
+    }
+
+    fn lights(&mut self, root: &Table<'_, '_>) -> Result<Vec<Light>, LoadError> {
+        let Some((arr, _)) = root.array("lights")? else {
+            return Ok(Vec::new());
+        };
+        let mut lights = Vec::new();
+        for (i, item) in arr.iter().enumerate() {
+            let DeValue::Table(tt) = item.get_ref() else {
+                return Err(root.err(
+                    &item.span(),
+                    &format!("lights[{i}]"),
+                    "expected a table ([[lights]])",
+                ));
+            };
+            let t = Table::new(root.source(), format!("lights[{i}]"), tt, item.span());
+            let kind = t.req_string("kind")?;
+            let color = t.req_vec3("color")?;
+            check_nonneg_rgb(&t, "color", &color)?;
+            let shadowless = t.bool("shadowless")?.is_some_and(|b| b.value);
+            let fd = t.f64("fade_distance")?;
+            let fp = t.f64("fade_power")?;
+            let kind = match kind.value.as_str() {
+                "point" => {
+                    let p = t.req_vec3("position")?;
+                    check_coord(&t, "position", &p)?;
+                    LightKind::Point {
+                        position: to_f32(p.value),
+                    }
+                }
+                "parallel" => {
+                    let d = t.req_vec3("direction")?;
+                    if d.value.length() == 0.0 {
+                        return Err(t.err(&d.span, "direction", "the direction must be non-zero"));
+                    }
+                    if let Some(f) = fd.as_ref().or(fp.as_ref()) {
+                        return Err(t.err(
+                            &f.span,
+                            if fd.is_some() {
+                                "fade_distance"
+                            } else {
+                                "fade_power"
+                            },
+                            "fade is only for point lights",
+                        ));
+                    }
+                    LightKind::Parallel {
+                        direction: to_f32(d.value.normalize()),
+                    }
+                }
+                other => {
+                    return Err(t.err(
+                        &kind.span,
+                        "kind",
+                        format!("expected \"point\" or \"parallel\", got \"{other}\""),
+                    ));
+                }
+            };
+            let fade = match (fd, fp) {
+                (None, None) => None,
+                (Some(d), Some(p)) => {
+                    for (v, key) in [(&d, "fade_distance"), (&p, "fade_power")] {
+                        if v.value <= 0.0 {
+                            return Err(t.err(
+                                &v.span,
+                                key,
+                                format!("expected > 0, got {}", v.value),
+                            ));
+                        }
+                    }
+                    #[expect(
+                        clippy::cast_possible_truncation,
+                        reason = "validated finite light parameters"
+                    )]
+                    Some((d.value as f32, p.value as f32))
+                }
+                (Some(v), None) => {
+                    return Err(t.err(
+                        &v.span,
+                        "fade_power",
+                        "fade_distance and fade_power go together: give both or neither",
+                    ));
+                }
+                (None, Some(v)) => {
+                    return Err(t.err(
+                        &v.span,
+                        "fade_distance",
+                        "fade_distance and fade_power go together: give both or neither",
+                    ));
+                }
+            };
+            t.finish()?;
+            lights.push(Light {
+                kind,
+                color: rgb_of(color.value),
+                shadowless,
+                fade,
+            });
+        }
+        if lights.len() > 31 {
+            return Err(root.err_here("lights", format!("at most 31 lights are supported (the shading flags have 31 shadow bits), got {}", lights.len())));
+        }
+        Ok(lights)
+    }
+
+    fn materials(
+        &mut self,
+        root: &Table<'_, '_>,
+    ) -> Result<(Vec<Material>, Vec<String>), LoadError> {
+        let Some(t) = root.table("materials")? else {
+            return Ok((Vec::new(), Vec::new()));
+        };
+        let mut out = Vec::new();
+        let mut names = Vec::new();
+        for (key, value) in t.entries() {
+            let name: &str = key.get_ref().as_ref();
+            let DeValue::Table(mt) = value.get_ref() else {
+                return Err(LoadError::key(
+                    root.path(),
+                    root.loc(&value.span()),
+                    format!("materials.{name}"),
+                    "expected a table of finish keys",
+                ));
+            };
+            let m = Table::new(root.source(), format!("materials.{name}"), mt, value.span());
+            out.push(self.material(&m, name)?);
+            names.push(name.to_string());
+        }
+        if out.len() > usize::from(u16::MAX) {
+            return Err(root.err_here("materials", "too many materials (at most 65535)"));
+        }
+        Ok((out, names))
+    }
+
+    fn material(&mut self, t: &Table<'_, '_>, name: &str) -> Result<Material, LoadError> {
+        let mut m = Material {
+            name: name.to_string(),
+            ..Material::default()
+        };
+        if t.has("pigment") {
+            let span = t.span_of("pigment").unwrap_or_default();
+            if let Some(pt) = t.table("pigment").ok().flatten() {
+                let file = pt.req_string("image")?;
+                pt.finish()?;
+                m.pigment = Pigment::Image(self.texture(&pt, "image", &file)?);
+            } else {
+                let v = t.vec3("pigment").map_err(|_| {
+                    t.err(
+                        &span,
+                        "pigment",
+                        "expected a colour [r, g, b] or { image = \"file.png\" }",
+                    )
+                })?;
+                if let Some(v) = v {
+                    check_nonneg_rgb(t, "pigment", &v)?;
+                    m.pigment = Pigment::Color(rgb_of(v.value));
+                }
+            }
+        }
+        let mut spans = HashMap::new();
+        {
+            let mut set = |key: &'static str, slot: &mut f32| -> Result<(), LoadError> {
+                if let Some(v) = t.f64(key)? {
+                    if v.value < 0.0 {
+                        return Err(t.err(&v.span, key, format!("expected ≥ 0, got {}", v.value)));
+                    }
+                    if v.value > f64::from(f32::MAX) {
+                        return Err(t.err(&v.span, key, "exceeds the f32 range"));
+                    }
+                    #[expect(
+                        clippy::cast_possible_truncation,
+                        reason = "checked to be within f32 range"
+                    )]
+                    {
+                        *slot = v.value as f32;
+                    }
+                    spans.insert(key, v.span);
+                }
+                Ok(())
+            };
+            set("ambient", &mut m.ambient)?;
+            set("diffuse", &mut m.diffuse)?;
+            set("brilliance", &mut m.brilliance)?;
+            set("phong", &mut m.phong)?;
+            set("phong_size", &mut m.phong_size)?;
+            set("specular", &mut m.specular)?;
+            set("roughness", &mut m.roughness)?;
+            set("metallic", &mut m.metallic)?;
+            set("reflection", &mut m.reflection)?;
+            set("filter", &mut m.filter)?;
+            set("transmit", &mut m.transmit)?;
+            set("ior", &mut m.ior)?;
+            set("emission", &mut m.emission)?;
+        }
+        let here = |key: &str| spans.get(key).cloned().unwrap_or_default();
+        if m.roughness <= 0.0 {
+            return Err(t.err(
+                &here("roughness"),
+                "roughness",
+                "expected > 0 (the specular exponent is 1/roughness)",
+            ));
+        }
+        if m.ior <= 0.0 {
+            return Err(t.err(&here("ior"), "ior", "expected > 0"));
+        }
+        if m.filter + m.transmit > 1.0 {
+            let key = if spans.contains_key("transmit") {
+                "transmit"
+            } else {
+                "filter"
+            };
+            return Err(t.err(
+                &here(key),
+                key,
+                format!(
+                    "filter + transmit must be ≤ 1, got {}",
+                    m.filter + m.transmit
+                ),
+            ));
+        }
+        if let Pigment::Image(tex) = &m.pigment {
+            if tex.has_alpha() && m.filter + m.transmit > 0.0 {
+                let key = if spans.contains_key("transmit") {
+                    "transmit"
+                } else {
+                    "filter"
+                };
+                return Err(t.err(&here(key), key, "an image pigment with an alpha channel sets transmit = 1 − alpha itself; remove filter/transmit or the alpha channel"));
+            }
+        }
+        if let Some(bt) = t.table("bump")? {
+            let file = bt.req_string("image")?;
+            let size = match bt.f64("size")? {
+                Some(s) => {
+                    #[expect(clippy::cast_possible_truncation, reason = "finite bump size")]
+                    let v = s.value as f32;
+                    v
+                }
+                None => 1.0,
+            };
+            let method = match bt.string("method")? {
+                None => BumpMethod::Blinn,
+                Some(s) if s.value == "blinn" => BumpMethod::Blinn,
+                Some(s) if s.value == "pov" => BumpMethod::Pov,
+                Some(s) => {
+                    return Err(bt.err(
+                        &s.span,
+                        "method",
+                        format!("expected \"blinn\" or \"pov\", got \"{}\"", s.value),
+                    ));
+                }
+            };
+            bt.finish()?;
+            let texture = self.texture(&bt, "image", &file)?;
+            m.bump = Some(Bump {
+                texture,
+                size,
+                method,
+            });
+        }
+        t.finish()?;
+        Ok(m)
+    }
+
+    fn objects(
+        &mut self,
+        root: &Table<'_, '_>,
+        materials: &[Material],
+        names: &[String],
+    ) -> Result<Vec<Object>, LoadError> {
+        let Some((arr, _)) = root.array("objects")? else {
+            return Ok(Vec::new());
+        };
+        let mut out = Vec::new();
+        for (i, item) in arr.iter().enumerate() {
+            let DeValue::Table(tt) = item.get_ref() else {
+                return Err(root.err(
+                    &item.span(),
+                    &format!("objects[{i}]"),
+                    "expected a table ([[objects]])",
+                ));
+            };
+            let t = Table::new(root.source(), format!("objects[{i}]"), tt, item.span());
+            out.push(self.object(&t, i, materials, names)?);
+        }
+        Ok(out)
+    }
+
+    fn transform(
+        &mut self,
+        t: &Table<'_, '_>,
+    ) -> Result<(Vec<TransformStep>, Transform), LoadError> {
+        let Some((arr, span)) = t.array("transform")? else {
+            return Ok((Vec::new(), Transform::IDENTITY));
+        };
+        let mut steps = Vec::new();
+        for (k, item) in arr.iter().enumerate() {
+            let DeValue::Table(st) = item.get_ref() else {
+                return Err(t.err(
+                    &item.span(),
+                    &format!("transform[{k}]"),
+                    "expected { scale = [x,y,z] }, { rotate = [x,y,z] } or { translate = [x,y,z] }",
+                ));
+            };
+            let s = Table::new(
+                t.source(),
+                t.key_name(&format!("transform[{k}]")),
+                st,
+                item.span(),
+            );
+            let scale = s.vec3("scale")?;
+            let rotate = s.vec3("rotate")?;
+            let translate = s.vec3("translate")?;
+            s.finish()?;
+            let step = match (scale, rotate, translate) {
+                (Some(v), None, None) => TransformStep::Scale(v.value),
+                (None, Some(v), None) => TransformStep::Rotate(v.value),
+                (None, None, Some(v)) => {
+                    check_coord(&s, "translate", &v)?;
+                    TransformStep::Translate(v.value)
+                }
+                _ => {
+                    return Err(t.err(
+                        &item.span(),
+                        &format!("transform[{k}]"),
+                        "each entry needs exactly one of scale, rotate or translate",
+                    ));
+                }
+            };
+            steps.push(step);
+        }
+        let tr = Transform::from_steps(&steps).ok_or_else(|| {
+            t.err(
+                &span,
+                "transform",
+                "the transform is singular (a zero or vanishing scale); it must be invertible",
+            )
+        })?;
+        Ok((steps, tr))
+    }
+
+    fn object(
+        &mut self,
+        t: &Table<'_, '_>,
+        index: usize,
+        materials: &[Material],
+        names: &[String],
+    ) -> Result<Object, LoadError> {
+        let kind = t.req_string("kind")?;
+        let mat_name = t.req_string("material")?;
+        let material = names
+            .iter()
+            .position(|n| *n == mat_name.value)
+            .ok_or_else(|| {
+                let known = if names.is_empty() {
+                    "none are defined".to_string()
+                } else {
+                    names.join(", ")
+                };
+                t.err(
+                    &mat_name.span,
+                    "material",
+                    format!("unknown material \"{}\" (defined: {known})", mat_name.value),
+                )
+            })?;
+        let (steps, transform) = self.transform(t)?;
+        let no_shadow = t.bool("no_shadow")?.is_some_and(|b| b.value);
+        let tess = t.int("tessellation")?;
+        let shape = match kind.value.as_str() {
+            "mesh" => {
+                let file = t.req_string("file")?;
+                let smooth = t.bool("smooth")?.is_some_and(|b| b.value);
+                let path = self.resolve(&file.value);
+                let data = if let Some(d) = self.meshes.get(&path) {
+                    d.clone()
+                } else {
+                    let bytes = std::fs::read(&path).map_err(|e| {
+                        t.err(
+                            &file.span,
+                            "file",
+                            format!("could not read mesh {}: {e}", path.display()),
+                        )
+                    })?;
+                    let d = Arc::new(obj::load_obj_bytes(&path, &bytes)?);
+                    self.meshes.insert(path, d.clone());
+                    d
+                };
+                Shape::Mesh { data, smooth }
+            }
+            "sphere" => {
+                let c = t.req_vec3("center")?;
+                check_coord(t, "center", &c)?;
+                let r = t.req_f64("radius")?;
+                if r.value <= 0.0 || r.value > MAX_COORDINATE {
+                    return Err(t.err(
+                        &r.span,
+                        "radius",
+                        format!("expected 0 < radius ≤ {MAX_COORDINATE:e}, got {}", r.value),
+                    ));
+                }
+                Shape::Sphere {
+                    center: c.value,
+                    radius: r.value,
+                }
+            }
+            "box" => {
+                let lo = t.req_vec3("min")?;
+                let hi = t.req_vec3("max")?;
+                check_coord(t, "min", &lo)?;
+                check_coord(t, "max", &hi)?;
+                if !lo.value.cmplt(hi.value).all() {
+                    return Err(t.err(
+                        &hi.span,
+                        "max",
+                        "expected min < max on every axis (a box needs a positive size)",
+                    ));
+                }
+                Shape::Box {
+                    min: lo.value,
+                    max: hi.value,
+                }
+            }
+            "polygon" => self.polygon(t)?,
+            "superellipsoid" => {
+                let ex = t
+                    .floats::<2>("exponents")?
+                    .ok_or_else(|| t.missing("exponents"))?;
+                let [e, n] = ex.value;
+                if !(e > 0.0 && e <= 4.0 && n > 0.0 && n <= 4.0) {
+                    return Err(t.err(
+                        &ex.span,
+                        "exponents",
+                        format!("expected 0 < e, n ≤ 4, got [{e}, {n}]"),
+                    ));
+                }
+                Shape::Superellipsoid { e, n }
+            }
+            other => {
+                return Err(t.err(
+                    &kind.span,
+                    "kind",
+                    format!(
+                        "expected mesh, sphere, box, polygon or superellipsoid, got \"{other}\""
+                    ),
+                ));
+            }
+        };
+        let tessellation = match tess {
+            None => None,
+            Some(v) => {
+                if !matches!(shape, Shape::Sphere { .. } | Shape::Superellipsoid { .. }) {
+                    return Err(t.err(&v.span, "tessellation", format!("only spheres and superellipsoids are tessellated; remove it from this {}", shape.kind())));
+                }
+                Some(
+                    u32::try_from(v.value)
+                        .ok()
+                        .filter(|n| (3..=4096).contains(n))
+                        .ok_or_else(|| {
+                            t.err(
+                                &v.span,
+                                "tessellation",
+                                format!("expected 3 … 4096 segments, got {}", v.value),
+                            )
+                        })?,
+                )
+            }
+        };
+        t.finish()?;
+        let mat = &materials[material];
+        let has_uv = match &shape {
+            Shape::Mesh { data, .. } => data.has_uv(),
+            Shape::Sphere { .. } => true,
+            Shape::Polygon(p) => p.uv.is_some(),
+            Shape::Box { .. } | Shape::Superellipsoid { .. } => false,
+        };
+        if mat.needs_uv() && !has_uv {
+            let why = match &shape {
+                Shape::Mesh { data, .. } => format!(
+                    "the mesh {} has no uv (vt) on every face{}",
+                    data.path.display(),
+                    data.first_face_without_uv()
+                        .map(|l| format!(" (first face without: line {l})"))
+                        .unwrap_or_default()
+                ),
+                Shape::Polygon(_) => "the polygon has no `uv`".to_string(),
+                s => format!("a {} has no uv coordinates", s.kind()),
+            };
+            return Err(t.err(
+                &mat_name.span,
+                "material",
+                format!(
+                    "material \"{}\" uses an image (pigment or bump) but {why}",
+                    mat.name
+                ),
+            ));
+        }
+        let refracts = mat.ior != 1.0 && mat.is_transparent();
+        if refracts && matches!(shape, Shape::Polygon(_)) {
+            return Err(t.err(&mat_name.span, "material", format!("material \"{}\" refracts (ior ≠ 1 with filter/transmit) but a polygon is not closed; refraction needs an inside", mat.name)));
+        }
+        let loc = t.loc(&t.span_of("kind").unwrap_or_default());
+        #[expect(
+            clippy::cast_possible_truncation,
+            reason = "material count is checked ≤ u16::MAX"
+        )]
+        let material = material as u16;
+        Ok(Object {
+            index,
+            loc,
+            shape,
+            material,
+            steps,
+            transform,
+            no_shadow,
+            tessellation,
+        })
+    }
+
+    fn points(
+        &self,
+        t: &Table<'_, '_>,
+        key: &'static str,
+        v: &toml::Spanned<DeValue<'_>>,
+    ) -> Result<Vec<DVec3>, LoadError> {
+        let DeValue::Array(items) = v.get_ref() else {
+            return Err(t.err(&v.span(), key, "expected an array of [x, y, z] points"));
+        };
+        let mut out = Vec::with_capacity(items.len());
+        for item in items.iter() {
+            let p = reader::floats_of::<3>(item).map_err(|m| t.err(&item.span(), key, m))?;
+            let p = DVec3::from_array(p);
+            if p.abs().max_element() > MAX_COORDINATE {
+                return Err(t.err(
+                    &item.span(),
+                    key,
+                    format!("coordinates must be within ±{MAX_COORDINATE:e}"),
+                ));
+            }
+            out.push(p);
+        }
+        Ok(out)
+    }
+
+    fn polygon(&mut self, t: &Table<'_, '_>) -> Result<Shape, LoadError> {
+        let (pts_arr, pts_span) = t.array("points")?.ok_or_else(|| t.missing("points"))?;
+        let pts_value = toml::Spanned::new(pts_span.clone(), DeValue::Array(pts_arr.clone()));
+        let outline = self.points(t, "points", &pts_value)?;
+        let mut holes = Vec::new();
+        if let Some((harr, _)) = t.array("holes")? {
+            for h in harr.iter() {
+                holes.push(self.points(t, "holes", h)?);
+            }
+        }
+        let uv = match t.array("uv")? {
+            None => None,
+            Some((uarr, _)) => {
+                let mut uv = Vec::new();
+                for item in uarr.iter() {
+                    uv.push(
+                        reader::floats_of::<2>(item).map_err(|m| t.err(&item.span(), "uv", m))?,
+                    );
+                }
+                Some(uv)
+            }
+        };
+        let tri = polygon::triangulate(
+            &outline,
+            &holes,
+            PolygonOptions {
+                check_planarity: true,
+            },
+        )
+        .map_err(|e| t.err(&pts_span, "points", format!("invalid polygon: {e}")))?;
+        let mut points = outline.clone();
+        let mut ring_sizes = vec![outline.len()];
+        for h in &holes {
+            points.extend_from_slice(h);
+            ring_sizes.push(h.len());
+        }
+        if let Some(uv) = &uv {
+            let span = t.span_of("uv").unwrap_or_default();
+            polygon::check_uv_affine(&points, uv, tri.normal)
+                .map_err(|e| t.err(&span, "uv", e.to_string()))?;
+        }
+        Ok(Shape::Polygon(Arc::new(PolygonShape {
+            points,
+            ring_sizes,
+            uv,
+            triangles: tri.triangles,
+            normal: tri.normal,
+        })))
+    }
+
+    fn raster(&mut self, root: &Table<'_, '_>) -> Result<RasterSettings, LoadError> {
+        let mut r = RasterSettings::default();
+        let Some(t) = root.table("raster")? else {
+            return Ok(r);
+        };
+        if let Some(s) = t.string("depth")? {
+            r.depth = s
+                .value
+                .parse()
+                .map_err(|m: String| t.err(&s.span, "depth", m))?;
+        }
+        if let Some(s) = t.string("shadows")? {
+            r.shadows = s
+                .value
+                .parse()
+                .map_err(|m: String| t.err(&s.span, "shadows", m))?;
+        }
+        t.finish()?;
+        Ok(r)
+    }
+
+    fn ray(&mut self, root: &Table<'_, '_>) -> Result<RaySettings, LoadError> {
+        let mut r = RaySettings::default();
+        let Some(t) = root.table("ray")? else {
+            return Ok(r);
+        };
+        if let Some(s) = t.string("bvh")? {
+            r.bvh = s
+                .value
+                .parse()
+                .map_err(|m: String| t.err(&s.span, "bvh", m))?;
+        }
+        if let Some(s) = t.string("geometry")? {
+            r.geometry = s
+                .value
+                .parse()
+                .map_err(|m: String| t.err(&s.span, "geometry", m))?;
+        }
+        t.finish()?;
+        Ok(r)
+    }
+
+    fn tolerance(&mut self, root: &Table<'_, '_>) -> Result<ToleranceSettings, LoadError> {
+        let mut r = ToleranceSettings::default();
+        let Some(t) = root.table("tolerance")? else {
+            return Ok(r);
+        };
+        let get = |key: &'static str| -> Result<Option<Located>, LoadError> {
+            Ok(match t.f64(key)? {
+                Some(v) if v.value >= 0.0 => Some(Located {
+                    value: v.value,
+                    loc: t.loc(&v.span),
+                }),
+                Some(v) => {
+                    return Err(t.err(&v.span, key, format!("expected ≥ 0, got {}", v.value)));
+                }
+                None => None,
+            })
+        };
+        r.shading_max = get("shading_max")?;
+        r.pov_max8 = get("pov_max8")?;
+        r.pov_fraction = get("pov_fraction")?;
+        t.finish()?;
+        Ok(r)
+    }
+}
+
+/// Converts a point of the scene to the f32 the renderers use.
+#[must_use]
+pub fn point_f32(p: DVec3) -> Vec3 {
+    to_f32(p)
+}

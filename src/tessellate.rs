@@ -1,0 +1,814 @@
+//! Scene → `TriScene`: every object becomes triangles in world space.
+//!
+//! * spheres: a latitude-longitude grid (poles on the object's y axis, as
+//!   POV-Ray's spherical map has them), `N` segments around and `N/2` rings,
+//!   exact vertex normals and the spherical uv map at the vertices;
+//! * superellipsoids: the same grid of directions (poles on z, POV-Ray's
+//!   north-south axis) pushed radially onto the surface, with the surface's
+//!   gradient as vertex normal;
+//! * boxes: 12 flat triangles on 8 shared corners;
+//! * polygons and OBJ faces: the constrained Delaunay triangulation made at
+//!   load time.
+//!
+//! Curved shapes get the smallest segment count whose chord error, measured
+//! on the tessellation itself, is within `tessellation_error` pixels at the
+//! shape's nearest view depth (DESIGN.md §4), or the object's fixed
+//! `tessellation`. Closed shapes share their vertices (no T-junctions), and
+//! every object is checked for closedness after welding equal positions;
+//! a closed object with negative signed volume has its winding reversed so
+//! its counter-clockwise side faces out (DESIGN.md §7).
+
+use std::collections::HashMap;
+
+use crate::camera::{Camera, Projection};
+use crate::math::{Aabb, DMat3, DVec3, Vec2, Vec3, to_f32, to_f64};
+use crate::scene::{LoadError, MAX_COORDINATE, Object, ProjectionDesc, Scene, Shape};
+use crate::tri_scene::{AnalyticSphere, NO_INDEX, ObjectInfo, TriScene};
+
+/// Largest segment count (DESIGN.md §4).
+pub const MAX_SEGMENTS: u32 = 4096;
+
+/// Overrides of the scene's image settings (the command line's `--size`
+/// and `--samples`); tessellation is computed at the final size.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct TessOptions {
+    /// Final image size.
+    pub size: Option<(u32, u32)>,
+    /// Final samples per pixel side.
+    pub samples: Option<u32>,
+}
+
+/// One object's geometry in object space before it joins the scene.
+#[derive(Default)]
+struct Piece {
+    positions: Vec<DVec3>,
+    tris: Vec<[u32; 3]>,
+    normals: Vec<DVec3>,
+    tri_normals: Vec<[u32; 3]>,
+    uvs: Vec<Vec2>,
+    tri_uvs: Vec<[u32; 3]>,
+    smooth: bool,
+    segments: Option<u32>,
+}
+
+/// The camera of a scene at its final size (far from `far` or `2·near`
+/// until the bounds are known).
+///
+/// # Errors
+///
+/// [`LoadError::Scene`] if the camera frame is degenerate.
+pub fn scene_camera(scene: &Scene, opts: &TessOptions) -> Result<Camera, LoadError> {
+    let (w, h) = opts.size.unwrap_or((scene.image.width, scene.image.height));
+    let samples = opts.samples.unwrap_or(scene.image.samples);
+    let c = &scene.camera;
+    let projection = match c.projection {
+        ProjectionDesc::Perspective { fov_y_deg } => Projection::Perspective {
+            tan_half_fov: (fov_y_deg.to_radians() / 2.0).tan(),
+        },
+        ProjectionDesc::Orthographic { view_height } => Projection::Orthographic { view_height },
+    };
+    Camera::new(
+        c.eye,
+        c.look_at,
+        c.up,
+        projection,
+        w,
+        h,
+        samples,
+        c.near,
+        c.far.unwrap_or(2.0 * c.near),
+    )
+    .map_err(|e| LoadError::Scene {
+        path: scene.path.clone(),
+        message: format!("camera: {e}"),
+    })
+}
+
+/// Largest singular value of a 3×3 matrix (power iteration on MᵀM).
+fn max_stretch(m: DMat3) -> f64 {
+    let a = m.transpose() * m;
+    let mut v = DVec3::new(0.577, 0.577, 0.578);
+    let mut lambda = 0.0;
+    for _ in 0..64 {
+        let w = a * v;
+        let len = w.length();
+        if len == 0.0 {
+            return 0.0;
+        }
+        lambda = len;
+        v = w / len;
+    }
+    lambda.sqrt()
+}
+
+/// Upper bound of the distance from a sphere of radius `r` to its
+/// lat-long tessellation with `n` segments: over the faces of one column,
+/// `r − distance(centre, face plane)`.
+#[must_use]
+pub fn sphere_chord_error(r: f64, n: u32) -> f64 {
+    let (verts, tris) = sphere_grid(n);
+    let mut worst: f64 = 0.0;
+    for t in tris
+        .iter()
+        .filter(|t| t.iter().all(|&i| verts[i as usize].1 <= 1))
+    {
+        let [a, b, c] = t.map(|i| verts[i as usize].0 * r);
+        let nrm = (b - a).cross(c - a);
+        if nrm.length() == 0.0 {
+            continue;
+        }
+        let d = a.dot(nrm.normalize()).abs();
+        worst = worst.max(r - d);
+    }
+    worst
+}
+
+/// Unit-sphere lat-long grid: (direction, column index) per vertex, and
+/// triangles wound counter-clockwise seen from outside. Poles on +y / −y.
+fn sphere_grid(n: u32) -> (Vec<(DVec3, u32)>, Vec<[u32; 3]>) {
+    let n = n.max(3);
+    let rings = (n / 2).max(2);
+    let mut verts = vec![(DVec3::Y, 0)];
+    for i in 1..rings {
+        let theta = std::f64::consts::PI * f64::from(i) / f64::from(rings);
+        for j in 0..n {
+            let phi = std::f64::consts::TAU * f64::from(j) / f64::from(n);
+            verts.push((
+                DVec3::new(
+                    theta.sin() * phi.cos(),
+                    theta.cos(),
+                    theta.sin() * phi.sin(),
+                ),
+                j,
+            ));
+        }
+    }
+    verts.push((-DVec3::Y, 0));
+    let south = u32::try_from(verts.len() - 1).unwrap_or(u32::MAX);
+    let ring = |i: u32, j: u32| 1 + (i - 1) * n + (j % n);
+    let mut tris = Vec::new();
+    for j in 0..n {
+        // Seen from outside (+y above), azimuth grows from +x toward +z,
+        // which is clockwise seen from above: wind (pole, j+1, j).
+        tris.push([0, ring(1, j + 1), ring(1, j)]);
+    }
+    for i in 1..rings - 1 {
+        for j in 0..n {
+            let (a, b, c, d) = (
+                ring(i, j),
+                ring(i, j + 1),
+                ring(i + 1, j),
+                ring(i + 1, j + 1),
+            );
+            tris.push([a, b, d]);
+            tris.push([a, d, c]);
+        }
+    }
+    for j in 0..n {
+        tris.push([south, ring(rings - 1, j), ring(rings - 1, j + 1)]);
+    }
+    (verts, tris)
+}
+
+fn sphere_piece(center: DVec3, radius: f64, n: u32) -> Piece {
+    let (verts, tris) = sphere_grid(n);
+    let n = n.max(3);
+    let rings = (n / 2).max(2);
+    let mut p = Piece {
+        smooth: true,
+        segments: Some(n),
+        ..Piece::default()
+    };
+    for (d, _) in &verts {
+        p.positions.push(center + *d * radius);
+        p.normals.push(*d);
+    }
+    // uv grid with a seam column: (rings + 1) × (n + 1); the pole corners
+    // take the middle of their triangle's column.
+    let uv_index = |i: u32, j: u32| i * (n + 1) + j;
+    for i in 0..=rings {
+        for j in 0..=n {
+            let u = f64::from(j) / f64::from(n);
+            let v = 1.0 - f64::from(i) / f64::from(rings);
+            #[expect(clippy::cast_possible_truncation, reason = "uv in [0, 1]")]
+            p.uvs.push(Vec2::new(u as f32, v as f32));
+        }
+    }
+    let pole_uv_base = u32::try_from(p.uvs.len()).unwrap_or(u32::MAX);
+    for j in 0..n {
+        let u = (f64::from(j) + 0.5) / f64::from(n);
+        #[expect(clippy::cast_possible_truncation, reason = "uv in [0, 1]")]
+        {
+            p.uvs.push(Vec2::new(u as f32, 1.0));
+            p.uvs.push(Vec2::new(u as f32, 0.0));
+        }
+    }
+    let south = u32::try_from(verts.len() - 1).unwrap_or(u32::MAX);
+    let col_of = |v: u32| verts[v as usize].1;
+    let ring_of = |v: u32| {
+        if v == 0 {
+            0
+        } else if v == south {
+            rings
+        } else {
+            1 + (v - 1) / n
+        }
+    };
+    for t in tris {
+        // The column of the triangle is its smallest column index on a
+        // ring, except across the seam (columns n−1 and 0): there the
+        // column-0 vertices take the seam copy u = 1.
+        let ring_cols: Vec<u32> = t
+            .iter()
+            .filter(|&&v| v != 0 && v != south)
+            .map(|&v| col_of(v))
+            .collect();
+        let spans_seam = ring_cols.contains(&0) && ring_cols.contains(&(n - 1));
+        let first_col = ring_cols
+            .iter()
+            .copied()
+            .filter(|&c| !(spans_seam && c == 0))
+            .min()
+            .unwrap_or(0);
+        let uvt = t.map(|v| {
+            if v == 0 {
+                pole_uv_base + 2 * first_col
+            } else if v == south {
+                pole_uv_base + 2 * first_col + 1
+            } else {
+                let c = col_of(v);
+                let c = if spans_seam && c == 0 { n } else { c };
+                uv_index(ring_of(v), c)
+            }
+        });
+        p.tris.push(t);
+        p.tri_normals.push(t);
+        p.tri_uvs.push(uvt);
+    }
+    p
+}
+
+/// The superellipsoid's implicit function F with F = 1 on the surface
+/// (homogeneous of degree 2/n).
+fn superellipsoid_f(e: f64, n: f64, d: DVec3) -> f64 {
+    let a = d.x.abs().powf(2.0 / e) + d.y.abs().powf(2.0 / e);
+    a.powf(e / n) + d.z.abs().powf(2.0 / n)
+}
+
+/// The surface point along unit direction `d`.
+fn superellipsoid_point(e: f64, n: f64, d: DVec3) -> DVec3 {
+    d * superellipsoid_f(e, n, d).powf(-n / 2.0)
+}
+
+/// Unit gradient of F at `p` (`None` where it is not finite: a cusp).
+fn superellipsoid_normal(e: f64, n: f64, p: DVec3) -> Option<DVec3> {
+    let a = p.x.abs().powf(2.0 / e) + p.y.abs().powf(2.0 / e);
+    let k = a.powf(e / n - 1.0);
+    let g = DVec3::new(
+        k * p.x.abs().powf(2.0 / e - 1.0) * p.x.signum(),
+        k * p.y.abs().powf(2.0 / e - 1.0) * p.y.signum(),
+        p.z.abs().powf(2.0 / n - 1.0) * p.z.signum(),
+    );
+    // 0·∞ and ∞/∞ give NaN; a zero component times a finite factor is fine.
+    let g = DVec3::new(
+        if p.x == 0.0 { 0.0 } else { g.x },
+        if p.y == 0.0 { 0.0 } else { g.y },
+        if p.z == 0.0 { 0.0 } else { g.z },
+    );
+    g.is_finite().then(|| g.try_normalize()).flatten()
+}
+
+/// Unit directions with poles on ±z (POV-Ray's superellipsoid axis),
+/// arranged as the sphere grid with y and z exchanged (keeping the winding).
+fn superellipsoid_grid(n: u32) -> (Vec<DVec3>, Vec<[u32; 3]>) {
+    let (verts, tris) = sphere_grid(n);
+    // (x, y, z) -> (x, z, -y) is a rotation (det +1): winding is kept.
+    let dirs = verts
+        .iter()
+        .map(|(d, _)| DVec3::new(d.x, -d.z, d.y))
+        .collect();
+    (dirs, tris)
+}
+
+/// Measured chord error of a superellipsoid tessellation: for every
+/// triangle, the radial distance between the surface and the triangle at
+/// 10 points (the centroid, the edge midpoints and 6 more), maximised.
+#[must_use]
+pub fn superellipsoid_chord_error(e: f64, n: f64, segments: u32, samples_per_side: u32) -> f64 {
+    let (dirs, tris) = superellipsoid_grid(segments);
+    let pts: Vec<DVec3> = dirs
+        .iter()
+        .map(|d| superellipsoid_point(e, n, *d))
+        .collect();
+    let k = f64::from(samples_per_side.max(2));
+    let mut worst: f64 = 0.0;
+    for t in &tris {
+        let [a, b, c] = t.map(|i| pts[i as usize]);
+        for i in 0..=samples_per_side {
+            for j in 0..=(samples_per_side - i) {
+                let (u, v) = (f64::from(i) / k, f64::from(j) / k);
+                let m = a + (b - a) * u + (c - a) * v;
+                let len = m.length();
+                if len == 0.0 {
+                    continue;
+                }
+                let s = superellipsoid_point(e, n, m / len);
+                worst = worst.max((s.length() - len).abs());
+            }
+        }
+    }
+    worst
+}
+
+fn superellipsoid_piece(e: f64, n: f64, segments: u32) -> Piece {
+    let (dirs, tris) = superellipsoid_grid(segments);
+    let mut p = Piece {
+        smooth: true,
+        segments: Some(segments.max(3)),
+        ..Piece::default()
+    };
+    p.positions = dirs
+        .iter()
+        .map(|d| superellipsoid_point(e, n, *d))
+        .collect();
+    // Gradient normals; at cusps (e or n > 2 on an axis) the area-weighted
+    // normal of the vertex's triangles instead.
+    let mut fallback = vec![DVec3::ZERO; p.positions.len()];
+    for t in &tris {
+        let [a, b, c] = t.map(|i| p.positions[i as usize]);
+        let w = (b - a).cross(c - a);
+        for &i in t {
+            fallback[i as usize] += w;
+        }
+    }
+    p.normals = p
+        .positions
+        .iter()
+        .zip(&fallback)
+        .map(|(q, f)| superellipsoid_normal(e, n, *q).unwrap_or_else(|| f.normalize_or_zero()))
+        .collect();
+    p.tri_normals.clone_from(&tris);
+    p.tri_uvs = vec![[NO_INDEX; 3]; tris.len()];
+    p.tris = tris;
+    p
+}
+
+fn box_piece(lo: DVec3, hi: DVec3) -> Piece {
+    let corner = |i: u32| {
+        DVec3::new(
+            if i & 1 == 0 { lo.x } else { hi.x },
+            if i & 2 == 0 { lo.y } else { hi.y },
+            if i & 4 == 0 { lo.z } else { hi.z },
+        )
+    };
+    let mut p = Piece::default();
+    p.positions = (0..8).map(corner).collect();
+    let center = (lo + hi) / 2.0;
+    // Each face as a quad of corner indices; orient each triangle outward.
+    let faces: [[u32; 4]; 6] = [
+        [0, 2, 6, 4], // -x
+        [1, 3, 7, 5], // +x
+        [0, 1, 5, 4], // -y
+        [2, 3, 7, 6], // +y
+        [0, 1, 3, 2], // -z
+        [4, 5, 7, 6], // +z
+    ];
+    for f in faces {
+        for t in [[f[0], f[1], f[2]], [f[0], f[2], f[3]]] {
+            let [a, b, c] = t.map(|i| p.positions[i as usize]);
+            let out = (b - a).cross(c - a).dot((a + b + c) / 3.0 - center) > 0.0;
+            p.tris.push(if out { t } else { [t[0], t[2], t[1]] });
+        }
+    }
+    p.tri_normals = vec![[NO_INDEX; 3]; 12];
+    p.tri_uvs = vec![[NO_INDEX; 3]; 12];
+    p
+}
+
+fn mesh_piece(data: &crate::scene::MeshData, smooth: bool) -> Piece {
+    let mut p = Piece {
+        smooth,
+        ..Piece::default()
+    };
+    p.positions = data.positions.iter().map(|v| to_f64(*v)).collect();
+    p.tris = data.triangles.iter().map(|t| t.v).collect();
+    p.uvs.clone_from(&data.uvs);
+    p.tri_uvs = data
+        .triangles
+        .iter()
+        .map(|t| t.t.unwrap_or([NO_INDEX; 3]))
+        .collect();
+    // File normals where a face has them (smooth only); the others get
+    // computed normals after welding (marked with NO_INDEX - 1 for now).
+    if smooth {
+        p.normals = data.normals.iter().map(|v| to_f64(*v)).collect();
+        p.tri_normals = data
+            .triangles
+            .iter()
+            .map(|t| t.n.unwrap_or([COMPUTE_NORMAL; 3]))
+            .collect();
+    } else {
+        p.tri_normals = vec![[NO_INDEX; 3]; p.tris.len()];
+    }
+    p
+}
+
+/// Marker: this corner's normal is computed (area-weighted, welded).
+const COMPUTE_NORMAL: u32 = NO_INDEX - 1;
+
+fn polygon_piece(poly: &crate::scene::PolygonShape) -> Piece {
+    let mut p = Piece::default();
+    p.positions.clone_from(&poly.points);
+    p.tris.clone_from(&poly.triangles);
+    p.tri_normals = vec![[NO_INDEX; 3]; p.tris.len()];
+    if let Some(uv) = &poly.uv {
+        #[expect(clippy::cast_possible_truncation, reason = "uv rounded to f32 once")]
+        {
+            p.uvs = uv
+                .iter()
+                .map(|q| Vec2::new(q[0] as f32, q[1] as f32))
+                .collect();
+        }
+        p.tri_uvs.clone_from(&p.tris);
+    } else {
+        p.tri_uvs = vec![[NO_INDEX; 3]; p.tris.len()];
+    }
+    p
+}
+
+/// Segment count for a curved object: fixed, or the smallest meeting the
+/// error bound (doubling, then bisection), capped at [`MAX_SEGMENTS`].
+fn choose_segments(fixed: Option<u32>, tolerance: f64, error: impl Fn(u32) -> f64) -> (u32, bool) {
+    if let Some(n) = fixed {
+        return (n, false);
+    }
+    let mut hi = 8u32;
+    while error(hi) > tolerance {
+        if hi >= MAX_SEGMENTS {
+            return (MAX_SEGMENTS, true);
+        }
+        hi = (hi * 2).min(MAX_SEGMENTS);
+    }
+    let mut lo = (hi / 2).max(3);
+    if error(lo) <= tolerance {
+        return (lo, false);
+    }
+    while hi - lo > 1 {
+        let mid = (lo + hi) / 2;
+        if error(mid) <= tolerance {
+            hi = mid;
+        } else {
+            lo = mid;
+        }
+    }
+    (hi, false)
+}
+
+/// Tessellates a scene into the `TriScene` every backend renders.
+///
+/// # Errors
+///
+/// [`LoadError`] for a degenerate camera, coordinates that leave the
+/// supported range after transforms, or a refracting material on an
+/// object that is not closed.
+pub fn tessellate(scene: &Scene, opts: &TessOptions) -> Result<TriScene, LoadError> {
+    let camera = scene_camera(scene, opts)?;
+    let err_px = scene.render.tessellation_error;
+    let mut out = TriScene {
+        positions: Vec::new(),
+        tris: Vec::new(),
+        normals: Vec::new(),
+        tri_normals: Vec::new(),
+        uvs: Vec::new(),
+        tri_uvs: Vec::new(),
+        tri_material: Vec::new(),
+        tri_object: Vec::new(),
+        objects: Vec::new(),
+        materials: scene.materials.clone(),
+        lights: scene.lights.clone(),
+        camera,
+        background: scene.image.background,
+        ambient_light: scene.render.ambient_light,
+        max_depth: scene.render.max_depth,
+        spheres: Vec::new(),
+        bounds: Aabb::EMPTY,
+        warnings: Vec::new(),
+    };
+    for obj in &scene.objects {
+        let piece = object_piece(scene, obj, &camera, err_px, &mut out.warnings)?;
+        append(scene, obj, piece, &mut out)?;
+    }
+    // far: just beyond the farthest corner of the bounds (DESIGN.md §2).
+    let far = match scene.camera.far {
+        Some(f) => f,
+        None => {
+            let b = out.bounds;
+            let deepest = b
+                .corners()
+                .iter()
+                .map(|c| camera.view_depth(to_f64(*c)))
+                .fold(f64::NEG_INFINITY, f64::max);
+            (1.001 * deepest).max(2.0 * camera.near())
+        }
+    };
+    out.camera = camera.with_far(far).map_err(|e| LoadError::Scene {
+        path: scene.path.clone(),
+        message: format!("camera: {e}"),
+    })?;
+    Ok(out)
+}
+
+fn object_piece(
+    scene: &Scene,
+    obj: &Object,
+    camera: &Camera,
+    err_px: f64,
+    warnings: &mut Vec<String>,
+) -> Result<Piece, LoadError> {
+    let stretch = max_stretch(DMat3::from_mat4(obj.transform.matrix()));
+    // World tolerance at the shape's nearest view depth, back in object space.
+    let object_tolerance = |c_obj: DVec3, r_obj: f64| {
+        let c = obj.transform.point(c_obj);
+        let r = r_obj * stretch;
+        let z = (camera.view_depth(c) - r).max(camera.near());
+        err_px / camera.max_pixels_per_unit(z) / stretch
+    };
+    let _ = scene;
+    Ok(match &obj.shape {
+        Shape::Sphere { center, radius } => {
+            let tol = object_tolerance(*center, *radius);
+            let (n, capped) =
+                choose_segments(obj.tessellation, tol, |n| sphere_chord_error(*radius, n));
+            if capped {
+                warnings.push(format!(
+                    "{}: {MAX_SEGMENTS} segments do not reach the tessellation error; capped",
+                    obj.label()
+                ));
+            }
+            sphere_piece(*center, *radius, n)
+        }
+        Shape::Superellipsoid { e, n: ns } => {
+            let tol = object_tolerance(DVec3::ZERO, 3f64.sqrt());
+            let (n, capped) = choose_segments(obj.tessellation, tol, |k| {
+                superellipsoid_chord_error(*e, *ns, k, 3)
+            });
+            if capped {
+                warnings.push(format!(
+                    "{}: {MAX_SEGMENTS} segments do not reach the tessellation error; capped",
+                    obj.label()
+                ));
+            }
+            superellipsoid_piece(*e, *ns, n)
+        }
+        Shape::Box { min, max } => box_piece(*min, *max),
+        Shape::Polygon(poly) => polygon_piece(poly),
+        Shape::Mesh { data, smooth } => mesh_piece(data, *smooth),
+    })
+}
+
+/// Exact-equality welding key of an f32 position.
+fn weld_key(p: Vec3) -> [u32; 3] {
+    // +0.0 and -0.0 are the same position.
+    let canon = |v: f32| if v == 0.0 { 0u32 } else { v.to_bits() };
+    [canon(p.x), canon(p.y), canon(p.z)]
+}
+
+/// `true` when every undirected edge is used by exactly two triangles, in
+/// opposite directions, and no triangle repeats a vertex.
+#[must_use]
+pub fn is_closed(tris: &[[u32; 3]]) -> bool {
+    if tris.is_empty() {
+        return false;
+    }
+    let mut edges: HashMap<(u32, u32), (u32, i32)> = HashMap::with_capacity(tris.len() * 3 / 2 + 1);
+    for t in tris {
+        if t[0] == t[1] || t[1] == t[2] || t[0] == t[2] {
+            return false;
+        }
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            let key = (a.min(b), a.max(b));
+            let e = edges.entry(key).or_insert((0, 0));
+            e.0 += 1;
+            e.1 += if a < b { 1 } else { -1 };
+        }
+    }
+    edges.values().all(|&(count, dir)| count == 2 && dir == 0)
+}
+
+fn append(
+    scene: &Scene,
+    obj: &Object,
+    mut piece: Piece,
+    out: &mut TriScene,
+) -> Result<(), LoadError> {
+    let tr = &obj.transform;
+    // Transform positions and weld equal ones.
+    let mut weld: HashMap<[u32; 3], u32> = HashMap::with_capacity(piece.positions.len());
+    let mut welded: Vec<Vec3> = Vec::with_capacity(piece.positions.len());
+    let mut remap: Vec<u32> = Vec::with_capacity(piece.positions.len());
+    for (k, p) in piece.positions.iter().enumerate() {
+        let w = tr.point(*p);
+        if !w.is_finite() || w.abs().max_element() > MAX_COORDINATE {
+            return Err(LoadError::Key {
+                path: scene.path.clone(),
+                loc: obj.loc,
+                key: format!("objects[{}]", obj.index),
+                message: format!(
+                    "vertex {k} lands at {w} after the transform; coordinates must be finite and within ±{MAX_COORDINATE:e}"
+                ),
+            });
+        }
+        let w32 = to_f32(w);
+        let next = u32::try_from(welded.len()).unwrap_or(u32::MAX);
+        let id = *weld.entry(weld_key(w32)).or_insert_with(|| {
+            welded.push(w32);
+            next
+        });
+        remap.push(id);
+    }
+    let mut tris: Vec<[u32; 3]> = piece
+        .tris
+        .iter()
+        .map(|t| t.map(|i| remap[i as usize]))
+        .collect();
+    let closed = is_closed(&tris);
+
+    // Closed objects face out: reverse the winding if the signed volume is negative.
+    if closed {
+        let volume: f64 = tris
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|i| to_f64(welded[i as usize]));
+                a.dot(b.cross(c))
+            })
+            .sum();
+        if volume < 0.0 {
+            for k in 0..tris.len() {
+                tris[k].swap(1, 2);
+                piece.tri_normals[k].swap(1, 2);
+                piece.tri_uvs[k].swap(1, 2);
+            }
+        }
+    }
+
+    let material = &scene.materials[usize::from(obj.material)];
+    if material.ior != 1.0 && material.is_transparent() && !closed {
+        return Err(LoadError::Key {
+            path: scene.path.clone(),
+            loc: obj.loc,
+            key: format!("objects[{}].material", obj.index),
+            message: format!(
+                "material \"{}\" refracts (ior ≠ 1 with filter/transmit) but {} is not closed (manifold and consistently oriented after welding); refraction needs an inside",
+                material.name,
+                obj.label()
+            ),
+        });
+    }
+
+    // Normals: transformed by the inverse transpose; computed ones are
+    // area-weighted over welded positions in world space.
+    let normal_base = u32::try_from(out.normals.len()).unwrap_or(u32::MAX);
+    let needs_computed = piece.tri_normals.iter().any(|t| t[0] == COMPUTE_NORMAL);
+    let mut computed_base = 0u32;
+    if piece.smooth {
+        for n in &piece.normals {
+            let w = tr.normal(*n).normalize_or_zero();
+            out.normals.push(to_f32(w));
+        }
+        if needs_computed {
+            computed_base = u32::try_from(out.normals.len()).unwrap_or(u32::MAX);
+            let mut acc = vec![DVec3::ZERO; welded.len()];
+            for t in &tris {
+                let [a, b, c] = t.map(|i| to_f64(welded[i as usize]));
+                let w = (b - a).cross(c - a);
+                for &i in t {
+                    acc[i as usize] += w;
+                }
+            }
+            out.normals
+                .extend(acc.iter().map(|n| to_f32(n.normalize_or_zero())));
+        }
+    }
+    let pos_base = u32::try_from(out.positions.len()).unwrap_or(u32::MAX);
+    let uv_base = u32::try_from(out.uvs.len()).unwrap_or(u32::MAX);
+    out.positions.extend_from_slice(&welded);
+    out.uvs.extend_from_slice(&piece.uvs);
+    let object_id = u32::try_from(out.objects.len()).unwrap_or(u32::MAX);
+    let first = u32::try_from(out.tris.len()).unwrap_or(u32::MAX);
+    let mut bounds = Aabb::EMPTY;
+    for (k, t) in tris.iter().enumerate() {
+        out.tris.push(t.map(|i| i + pos_base));
+        for &i in t {
+            bounds = bounds.grow(welded[i as usize]);
+        }
+        let tn = piece.tri_normals[k];
+        let tn = if tn[0] == NO_INDEX || !piece.smooth {
+            [NO_INDEX; 3]
+        } else {
+            let mut r = [0u32; 3];
+            for c in 0..3 {
+                r[c] = if tn[c] == COMPUTE_NORMAL {
+                    computed_base + t[c]
+                } else {
+                    normal_base + tn[c]
+                };
+            }
+            r
+        };
+        out.tri_normals.push(tn);
+        let tu = piece.tri_uvs[k];
+        out.tri_uvs.push(if tu[0] == NO_INDEX {
+            tu
+        } else {
+            tu.map(|i| i + uv_base)
+        });
+        out.tri_material.push(obj.material);
+        out.tri_object.push(object_id);
+    }
+    let last = u32::try_from(out.tris.len()).unwrap_or(u32::MAX);
+    out.bounds = out.bounds.union(bounds);
+    if let Shape::Sphere { center, radius } = &obj.shape {
+        if let Some(s) = tr.uniform_scale() {
+            out.spheres.push(AnalyticSphere {
+                object: object_id,
+                center: tr.point(*center),
+                radius: radius * s,
+                world_to_object: tr.matrix().inverse(),
+                object_center: *center,
+                material: obj.material,
+            });
+        }
+    }
+    out.objects.push(ObjectInfo {
+        label: obj.label(),
+        kind: obj.shape.kind(),
+        tris: first..last,
+        bounds,
+        closed,
+        no_shadow: obj.no_shadow,
+        material: obj.material,
+        smooth: piece.smooth,
+        segments: piece.segments,
+    });
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sphere_grid_is_closed_and_outward() {
+        for n in [3, 4, 7, 16, 33] {
+            let (verts, tris) = sphere_grid(n);
+            assert!(is_closed(&tris), "n = {n}");
+            let vol: f64 = tris
+                .iter()
+                .map(|t| {
+                    let [a, b, c] = t.map(|i| verts[i as usize].0);
+                    a.dot(b.cross(c))
+                })
+                .sum();
+            assert!(
+                vol > 0.0,
+                "n = {n}: the counter-clockwise side must face out"
+            );
+        }
+    }
+
+    #[test]
+    fn box_is_closed_and_outward() {
+        let p = box_piece(DVec3::splat(-1.0), DVec3::new(2.0, 1.0, 3.0));
+        assert!(is_closed(&p.tris));
+        for t in &p.tris {
+            let [a, b, c] = t.map(|i| p.positions[i as usize]);
+            let centroid = (a + b + c) / 3.0;
+            assert!(
+                (b - a)
+                    .cross(c - a)
+                    .dot(centroid - DVec3::new(0.5, 0.0, 1.0))
+                    > 0.0
+            );
+        }
+    }
+
+    #[test]
+    fn superellipsoid_unit_exponents_is_a_sphere() {
+        let p = superellipsoid_point(1.0, 1.0, DVec3::new(1.0, 2.0, 2.0).normalize());
+        assert!((p.length() - 1.0).abs() < 1e-12);
+        let q = superellipsoid_point(0.3, 0.7, DVec3::new(0.2, -0.5, 0.8).normalize());
+        assert!((superellipsoid_f(0.3, 0.7, q) - 1.0).abs() < 1e-12);
+        let nrm = superellipsoid_normal(1.0, 1.0, p).unwrap();
+        assert!((nrm - p).length() < 1e-12);
+    }
+
+    #[test]
+    fn segment_choice_is_minimal() {
+        let tol = 1e-3;
+        let (n, capped) = choose_segments(None, tol, |n| sphere_chord_error(1.0, n));
+        assert!(!capped);
+        assert!(sphere_chord_error(1.0, n) <= tol);
+        assert!(sphere_chord_error(1.0, n - 1) > tol);
+    }
+}

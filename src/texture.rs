@@ -1,0 +1,280 @@
+//! Image textures: decoding PNG bytes into linear texels, and the bilinear
+//! lookup of DESIGN.md §3 / POVRAY.md §6 (texel centres at `(k + 0.5)/w`,
+//! uv (0, 0) at the image's bottom-left corner, repeat outside [0, 1)).
+//!
+//! Texels are read as *linear* values (`v/255` or `v/65535`), never
+//! sRGB-decoded: POV-Ray with `gamma 1.0` does the same, so a texture means
+//! the same number to every renderer.
+
+use std::path::{Path, PathBuf};
+
+use crate::color::Rgb;
+use crate::math::Vec2;
+
+/// A decoded texture.
+///
+/// # Guarantees
+///
+/// `1 ≤ width, height ≤ 16384`; `texels.len() == width·height`; every texel
+/// channel is finite and in `[0, 1]`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Texture {
+    path: PathBuf,
+    width: u32,
+    height: u32,
+    /// Row-major from the top row, RGBA (alpha 1 where the file has none).
+    texels: Vec<[f32; 4]>,
+    has_alpha: bool,
+    grey: bool,
+    bit_depth: u8,
+}
+
+/// A texel sample: colour and alpha (alpha is 1 for opaque images).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TexSample {
+    /// Colour (linear).
+    pub rgb: Rgb,
+    /// Alpha in `[0, 1]`.
+    pub alpha: f32,
+}
+
+/// Why a texture could not be decoded.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{message}")]
+pub struct TextureError {
+    /// What was wrong.
+    pub message: String,
+}
+
+impl Texture {
+    /// Largest accepted side in texels.
+    pub const MAX_SIDE: u32 = 16_384;
+
+    /// Decodes PNG bytes; `path` names the file in errors and exports.
+    ///
+    /// # Errors
+    ///
+    /// [`TextureError`] when the bytes are not a PNG the decoder accepts or
+    /// the image is larger than [`Texture::MAX_SIDE`] on a side.
+    pub fn from_png_bytes(path: &Path, bytes: &[u8]) -> Result<Texture, TextureError> {
+        use image::ImageDecoder;
+        let err = |m: String| TextureError { message: m };
+        let mut decoder = image::codecs::png::PngDecoder::new(std::io::Cursor::new(bytes))
+            .map_err(|e| err(format!("not a readable PNG: {e}")))?;
+        decoder.set_limits(image::Limits::default()).ok();
+        let (w, h) = decoder.dimensions();
+        if w == 0 || h == 0 || w > Self::MAX_SIDE || h > Self::MAX_SIDE {
+            return Err(err(format!(
+                "image is {w}x{h}; each side must be 1 … {}",
+                Self::MAX_SIDE
+            )));
+        }
+        let color = decoder.color_type();
+        let img = image::DynamicImage::from_decoder(decoder)
+            .map_err(|e| err(format!("not a readable PNG: {e}")))?;
+        let has_alpha = color.has_alpha();
+        let grey = !color.has_color();
+        let bit_depth: u8 = if color.bytes_per_pixel() / color.channel_count() >= 2 {
+            16
+        } else {
+            8
+        };
+        let texels: Vec<[f32; 4]> = if bit_depth == 16 {
+            img.to_rgba16()
+                .pixels()
+                .map(|p| p.0.map(|v| f32::from(v) / 65535.0))
+                .collect()
+        } else {
+            img.to_rgba8()
+                .pixels()
+                .map(|p| p.0.map(|v| f32::from(v) / 255.0))
+                .collect()
+        };
+        Ok(Texture {
+            path: path.to_path_buf(),
+            width: w,
+            height: h,
+            texels,
+            has_alpha,
+            grey,
+            bit_depth,
+        })
+    }
+
+    /// Reads and decodes a PNG file.
+    ///
+    /// # Errors
+    ///
+    /// [`TextureError`] naming what failed (the caller adds the path).
+    pub fn load(path: &Path) -> Result<Texture, TextureError> {
+        let bytes = std::fs::read(path).map_err(|e| TextureError {
+            message: format!("could not read: {e}"),
+        })?;
+        Texture::from_png_bytes(path, &bytes)
+    }
+
+    /// A texture from texels (row-major from the top row), for tests and
+    /// generated images.
+    ///
+    /// # Panics
+    ///
+    /// If `texels.len() != width·height` or a side is 0.
+    #[must_use]
+    pub fn from_texels(width: u32, height: u32, texels: Vec<[f32; 4]>) -> Texture {
+        assert!(width > 0 && height > 0);
+        assert_eq!(texels.len(), (width as usize) * (height as usize));
+        let has_alpha = texels.iter().any(|t| t[3] != 1.0);
+        Texture {
+            path: PathBuf::new(),
+            width,
+            height,
+            texels,
+            has_alpha,
+            grey: false,
+            bit_depth: 16,
+        }
+    }
+
+    /// The file the texture came from.
+    #[must_use]
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+    /// Width in texels.
+    #[must_use]
+    pub fn width(&self) -> u32 {
+        self.width
+    }
+    /// Height in texels.
+    #[must_use]
+    pub fn height(&self) -> u32 {
+        self.height
+    }
+    /// `true` when the file has an alpha channel.
+    #[must_use]
+    pub fn has_alpha(&self) -> bool {
+        self.has_alpha
+    }
+    /// `true` when the file is greyscale (POV-Ray misreads 8-bit greyscale, POVRAY.md §9.2).
+    #[must_use]
+    pub fn is_grey(&self) -> bool {
+        self.grey
+    }
+    /// 8 or 16.
+    #[must_use]
+    pub fn bit_depth(&self) -> u8 {
+        self.bit_depth
+    }
+    /// The texels, row-major from the top row.
+    #[must_use]
+    pub fn texels(&self) -> &[[f32; 4]] {
+        &self.texels
+    }
+
+    fn texel(&self, x: i64, y: i64) -> [f32; 4] {
+        let w = i64::from(self.width);
+        let h = i64::from(self.height);
+        let xi = usize::try_from(x.rem_euclid(w)).unwrap_or(0);
+        let yi = usize::try_from(y.rem_euclid(h)).unwrap_or(0);
+        self.texels[yi * self.width as usize + xi]
+    }
+
+    /// Bilinear lookup at uv, wrapping (repeat) outside [0, 1).
+    ///
+    /// Image coordinates are `x = u·w`, `y = (1 − v)·h` (row 0 at the top),
+    /// and texel `(k, r)` has its centre at `(k + 0.5, r + 0.5)`; colour and
+    /// alpha are interpolated separately (not premultiplied), as POV-Ray's
+    /// `interpolate 2` does.
+    #[must_use]
+    pub fn sample(&self, uv: Vec2) -> TexSample {
+        let t = self.bilinear(
+            f64::from(uv.x) * f64::from(self.width),
+            (1.0 - f64::from(uv.y)) * f64::from(self.height),
+        );
+        TexSample {
+            rgb: Rgb::new(t[0], t[1], t[2]),
+            alpha: t[3],
+        }
+    }
+
+    /// Bilinear lookup at image coordinates `(x, y)` (texel centres at +0.5).
+    #[must_use]
+    #[expect(
+        clippy::cast_possible_truncation,
+        reason = "floor of a finite, wrapped coordinate; non-finite input is mapped to 0 first"
+    )]
+    pub fn bilinear(&self, x: f64, y: f64) -> [f32; 4] {
+        let x = if x.is_finite() { x } else { 0.0 };
+        let y = if y.is_finite() { y } else { 0.0 };
+        // Wrap first so huge coordinates keep their fractional part.
+        let x = (x - 0.5).rem_euclid(f64::from(self.width));
+        let y = (y - 0.5).rem_euclid(f64::from(self.height));
+        let x0 = x.floor();
+        let y0 = y.floor();
+        let fx = (x - x0) as f32;
+        let fy = (y - y0) as f32;
+        let (x0, y0) = (x0 as i64, y0 as i64);
+        let a = self.texel(x0, y0);
+        let b = self.texel(x0 + 1, y0);
+        let c = self.texel(x0, y0 + 1);
+        let d = self.texel(x0 + 1, y0 + 1);
+        let mut out = [0.0f32; 4];
+        for k in 0..4 {
+            let top = a[k] + (b[k] - a[k]) * fx;
+            let bot = c[k] + (d[k] - c[k]) * fx;
+            out[k] = top + (bot - top) * fy;
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn checker() -> Texture {
+        // 2x2: top row red, green; bottom row blue, white.
+        Texture::from_texels(
+            2,
+            2,
+            vec![
+                [1.0, 0.0, 0.0, 1.0],
+                [0.0, 1.0, 0.0, 1.0],
+                [0.0, 0.0, 1.0, 1.0],
+                [1.0, 1.0, 1.0, 1.0],
+            ],
+        )
+    }
+
+    #[test]
+    fn uv_origin_is_bottom_left_and_centres_are_exact() {
+        let t = checker();
+        // Centre of the bottom-left texel: u = 0.25, v = 0.25 -> blue.
+        assert_eq!(t.sample(Vec2::new(0.25, 0.25)).rgb, Rgb::new(0.0, 0.0, 1.0));
+        // Centre of the top-right texel -> green.
+        assert_eq!(t.sample(Vec2::new(0.75, 0.75)).rgb, Rgb::new(0.0, 1.0, 0.0));
+    }
+
+    #[test]
+    fn bilinear_blends_and_wraps() {
+        let t = checker();
+        // Midway between the two top texels: (red + green) / 2.
+        let s = t.sample(Vec2::new(0.5, 0.75)).rgb;
+        assert!((s.r - 0.5).abs() < 1e-6 && (s.g - 0.5).abs() < 1e-6 && s.b.abs() < 1e-6);
+        // u = 0 lies between the last and first columns (wrap): red/green blend.
+        let s = t.sample(Vec2::new(0.0, 0.75)).rgb;
+        assert!((s.r - 0.5).abs() < 1e-6 && (s.g - 0.5).abs() < 1e-6);
+        // Repeat: u + 3 gives the same value.
+        assert_eq!(
+            t.sample(Vec2::new(3.25, -1.75)),
+            t.sample(Vec2::new(0.25, 0.25))
+        );
+    }
+
+    #[test]
+    fn garbage_bytes_are_an_error_not_a_panic() {
+        let e = Texture::from_png_bytes(Path::new("x.png"), b"\x89PNG\r\n\x1a\nnope").unwrap_err();
+        assert!(e.message.contains("PNG"), "{e}");
+        assert!(Texture::from_png_bytes(Path::new("x.png"), b"").is_err());
+    }
+}

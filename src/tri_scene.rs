@@ -1,0 +1,319 @@
+//! `TriScene`: the one triangulated scene every backend sees (DESIGN.md §1).
+//!
+//! Flat arrays in world space, after transforms: a position pool with three
+//! indices per triangle; normals and uvs per triangle corner (pools with
+//! their own indices, [`NO_INDEX`] for a flat triangle or one without uv);
+//! a material and an object per triangle; per-object bounds and closedness.
+//! [`TriScene::surface_at`] is the only place a hit becomes shading inputs.
+
+use std::ops::Range;
+
+use crate::camera::Camera;
+use crate::color::Rgb;
+use crate::math::{Aabb, Bary, DMat4, DVec3, Vec2, Vec3, to_f32, to_f64};
+use crate::shade::{Light, Material, SurfacePoint, interpolation_error};
+
+/// "No normal" / "no uv" in a corner index triple.
+pub const NO_INDEX: u32 = u32::MAX;
+
+/// Per-object facts the plan, the backends and the exporter need.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ObjectInfo {
+    /// `objects[i] (kind)`.
+    pub label: String,
+    /// The shape kind.
+    pub kind: &'static str,
+    /// The object's triangles (contiguous ids).
+    pub tris: Range<u32>,
+    /// World-space bounds of its triangles.
+    pub bounds: Aabb,
+    /// Manifold and consistently oriented after welding equal positions
+    /// (DESIGN.md §7); then its counter-clockwise side faces out.
+    pub closed: bool,
+    /// Casts no shadows.
+    pub no_shadow: bool,
+    /// Material index.
+    pub material: u16,
+    /// Uses interpolated vertex normals.
+    pub smooth: bool,
+    /// Segments around the equator (spheres, superellipsoids).
+    pub segments: Option<u32>,
+}
+
+/// A sphere kept analytic for `--geometry analytic` (similarity transforms only).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AnalyticSphere {
+    /// The object it stands for.
+    pub object: u32,
+    /// World-space centre.
+    pub center: DVec3,
+    /// World-space radius.
+    pub radius: f64,
+    /// Maps world points back to the sphere's own frame (for the spherical uv map).
+    pub world_to_object: DMat4,
+    /// Centre as written (object space).
+    pub object_center: DVec3,
+    /// Material.
+    pub material: u16,
+}
+
+/// The triangulated scene.
+#[derive(Clone, Debug)]
+pub struct TriScene {
+    /// Vertex positions.
+    pub positions: Vec<Vec3>,
+    /// Position indices per triangle.
+    pub tris: Vec<[u32; 3]>,
+    /// Unit normals.
+    pub normals: Vec<Vec3>,
+    /// Normal indices per triangle corner ([`NO_INDEX`]: flat triangle).
+    pub tri_normals: Vec<[u32; 3]>,
+    /// Texture coordinates.
+    pub uvs: Vec<Vec2>,
+    /// uv indices per triangle corner ([`NO_INDEX`]: no uv).
+    pub tri_uvs: Vec<[u32; 3]>,
+    /// Material per triangle.
+    pub tri_material: Vec<u16>,
+    /// Object per triangle.
+    pub tri_object: Vec<u32>,
+    /// Objects.
+    pub objects: Vec<ObjectInfo>,
+    /// Materials.
+    pub materials: Vec<Material>,
+    /// Lights.
+    pub lights: Vec<Light>,
+    /// The camera (with its final image size and `far`).
+    pub camera: Camera,
+    /// Background colour.
+    pub background: Rgb,
+    /// `ambient_light`.
+    pub ambient_light: Rgb,
+    /// `max_depth`.
+    pub max_depth: u32,
+    /// Analytic spheres (used only with `--geometry analytic`).
+    pub spheres: Vec<AnalyticSphere>,
+    /// Bounds of every triangle.
+    pub bounds: Aabb,
+    /// Messages for the user (e.g. a segment count capped).
+    pub warnings: Vec<String>,
+}
+
+impl TriScene {
+    /// Number of triangles.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.tris.len()
+    }
+
+    /// `true` when there are no triangles.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.tris.is_empty()
+    }
+
+    /// The three vertex positions of a triangle.
+    #[must_use]
+    #[inline]
+    pub fn triangle(&self, tri: u32) -> [Vec3; 3] {
+        let t = self.tris[tri as usize];
+        [
+            self.positions[t[0] as usize],
+            self.positions[t[1] as usize],
+            self.positions[t[2] as usize],
+        ]
+    }
+
+    /// The triangle's vertices in `f64` (exact widening).
+    #[must_use]
+    pub fn triangle_f64(&self, tri: u32) -> [DVec3; 3] {
+        self.triangle(tri).map(to_f64)
+    }
+
+    /// Unit geometric normal `(v1 − v0) × (v2 − v0)` (zero for a degenerate triangle).
+    #[must_use]
+    pub fn geometric_normal(&self, tri: u32) -> Vec3 {
+        let [a, b, c] = self.triangle(tri);
+        let n = to_f64(b - a).cross(to_f64(c - a));
+        to_f32(n.normalize_or_zero())
+    }
+
+    /// Shading inputs of triangle `tri` at barycentric weights `b`.
+    ///
+    /// Both backends call this. If the raster and ray images differ on a
+    /// sample, the cause is which triangle and which `b` they found there,
+    /// never how the point was shaded.
+    #[must_use]
+    pub fn surface_at(&self, tri: u32, b: Bary) -> SurfacePoint {
+        let i = tri as usize;
+        let v = self.triangle(tri);
+        let p = b.interpolate(v);
+        let p_error = interpolation_error(b.0, v);
+        let mut ng = self.geometric_normal(tri);
+        let n_idx = self.tri_normals[i];
+        let mut ns = if n_idx[0] == NO_INDEX {
+            ng
+        } else {
+            let n = b.interpolate(n_idx.map(|k| self.normals[k as usize]));
+            n.try_normalize().unwrap_or(ng)
+        };
+        if ng == Vec3::ZERO {
+            // A degenerate triangle: take the shading normal, or any unit vector.
+            ng = if ns == Vec3::ZERO { Vec3::Y } else { ns };
+            if ns == Vec3::ZERO {
+                ns = ng;
+            }
+        }
+        let material = self.tri_material[i];
+        let uv_idx = self.tri_uvs[i];
+        let (uv, dpdu, dpdv) = if uv_idx[0] == NO_INDEX {
+            (None, Vec3::ZERO, Vec3::ZERO)
+        } else {
+            let t = uv_idx.map(|k| self.uvs[k as usize]);
+            let uv = b.interpolate2(t);
+            let (dpdu, dpdv) = if self.materials[usize::from(material)].bump.is_some() {
+                uv_derivatives(v, t)
+            } else {
+                (Vec3::ZERO, Vec3::ZERO)
+            };
+            (Some(uv), dpdu, dpdv)
+        };
+        SurfacePoint {
+            p,
+            p_error,
+            ng,
+            ns,
+            uv,
+            dpdu,
+            dpdv,
+            material,
+            object: self.tri_object[i],
+            prim: tri,
+        }
+    }
+
+    /// Id of analytic sphere `k` (above every triangle id).
+    #[must_use]
+    pub fn sphere_id(&self, k: usize) -> u32 {
+        u32::try_from(self.tris.len() + k).unwrap_or(u32::MAX)
+    }
+
+    /// Shading inputs of analytic sphere `k` at world point `p`.
+    #[must_use]
+    pub fn sphere_surface_at(&self, k: usize, p: DVec3) -> SurfacePoint {
+        let s = &self.spheres[k];
+        let n = ((p - s.center) / s.radius).normalize_or_zero();
+        let q = (s.world_to_object.transform_point3(p) - s.object_center).normalize_or_zero();
+        let uv = sphere_uv(q);
+        let p32 = to_f32(p);
+        // The hit point comes from the stable quadratic: its error is a few
+        // ulps of the largest coordinate involved.
+        let scale = p.abs().max(s.center.abs()) + DVec3::splat(s.radius);
+        let p_error = to_f32(scale * 8.0 * f64::from(f32::EPSILON));
+        let ns = to_f32(n);
+        SurfacePoint {
+            p: p32,
+            p_error,
+            ng: ns,
+            ns,
+            uv: Some(uv),
+            dpdu: Vec3::ZERO,
+            dpdv: Vec3::ZERO,
+            material: s.material,
+            object: s.object,
+            prim: self.sphere_id(k),
+        }
+    }
+
+    /// The object of a primitive id (triangle or analytic sphere).
+    #[must_use]
+    pub fn object_of(&self, prim: u32) -> Option<u32> {
+        let i = prim as usize;
+        if i < self.tris.len() {
+            Some(self.tri_object[i])
+        } else {
+            self.spheres.get(i - self.tris.len()).map(|s| s.object)
+        }
+    }
+
+    /// Bytes held by the geometry arrays (for the resource report).
+    #[must_use]
+    pub fn geometry_bytes(&self) -> usize {
+        use std::mem::size_of;
+        self.positions.len() * size_of::<Vec3>()
+            + self.tris.len() * size_of::<[u32; 3]>()
+            + self.normals.len() * size_of::<Vec3>()
+            + self.tri_normals.len() * size_of::<[u32; 3]>()
+            + self.uvs.len() * size_of::<Vec2>()
+            + self.tri_uvs.len() * size_of::<[u32; 3]>()
+            + self.tri_material.len() * size_of::<u16>()
+            + self.tri_object.len() * size_of::<u32>()
+    }
+}
+
+/// POV-Ray's spherical map (POVRAY.md §9.1) of a unit direction in the
+/// sphere's own frame: `u = atan2(z, x)/2π` in [0, 1), `v = 0.5 + asin(y)/π`.
+#[must_use]
+pub fn sphere_uv(q: DVec3) -> Vec2 {
+    // At the poles u = 0 (POVRAY.md §9.1).
+    let mut u = if q.x == 0.0 && q.z == 0.0 {
+        0.0
+    } else {
+        q.z.atan2(q.x) / std::f64::consts::TAU
+    };
+    if u < 0.0 {
+        u += 1.0;
+    }
+    if u >= 1.0 {
+        u -= 1.0;
+    }
+    let v = 0.5 + q.y.clamp(-1.0, 1.0).asin() / std::f64::consts::PI;
+    #[expect(clippy::cast_possible_truncation, reason = "uv rounded to f32 once")]
+    Vec2::new(u as f32, v as f32)
+}
+
+/// ∂P/∂u and ∂P/∂v of a triangle from its positions and uvs (zero when the
+/// uv triangle is degenerate): solves `[P1 − P0, P2 − P0] = [P_u P_v]·[[Δu1, Δu2], [Δv1, Δv2]]`.
+#[must_use]
+pub fn uv_derivatives(p: [Vec3; 3], t: [Vec2; 3]) -> (Vec3, Vec3) {
+    let (dp1, dp2) = (to_f64(p[1] - p[0]), to_f64(p[2] - p[0]));
+    let du1 = f64::from(t[1].x - t[0].x);
+    let dv1 = f64::from(t[1].y - t[0].y);
+    let du2 = f64::from(t[2].x - t[0].x);
+    let dv2 = f64::from(t[2].y - t[0].y);
+    let det = du1 * dv2 - du2 * dv1;
+    if det == 0.0 || !det.is_finite() {
+        return (Vec3::ZERO, Vec3::ZERO);
+    }
+    let pu = (dp1 * dv2 - dp2 * dv1) / det;
+    let pv = (dp2 * du1 - dp1 * du2) / det;
+    (to_f32(pu), to_f32(pv))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn uv_derivatives_of_a_unit_square_triangle() {
+        let p = [
+            Vec3::ZERO,
+            Vec3::new(2.0, 0.0, 0.0),
+            Vec3::new(0.0, 3.0, 0.0),
+        ];
+        let t = [Vec2::ZERO, Vec2::new(1.0, 0.0), Vec2::new(0.0, 1.0)];
+        let (pu, pv) = uv_derivatives(p, t);
+        assert_eq!(pu, Vec3::new(2.0, 0.0, 0.0));
+        assert_eq!(pv, Vec3::new(0.0, 3.0, 0.0));
+    }
+
+    #[test]
+    fn sphere_uv_follows_povray() {
+        // u = 0 on +x, 0.25 on +z, 0.5 on -x; v = 1 at the +y pole.
+        let close = |a: Vec2, b: Vec2| (a - b).length() < 1e-6;
+        assert!(close(sphere_uv(DVec3::X), Vec2::new(0.0, 0.5)));
+        assert!(close(sphere_uv(DVec3::Z), Vec2::new(0.25, 0.5)));
+        assert!(close(sphere_uv(-DVec3::X), Vec2::new(0.5, 0.5)));
+        assert!(close(sphere_uv(DVec3::Y), Vec2::new(0.0, 1.0)));
+        assert!(close(sphere_uv(-DVec3::Y), Vec2::new(0.0, 0.0)));
+    }
+}
