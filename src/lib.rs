@@ -8,7 +8,15 @@
 //! The data flow (DESIGN.md §1):
 //!
 //! ```text
-//! scene.toml ─ scene::Scene::load ─▶ Scene ─ tessellate ─▶ TriScene ─▶ backends ─▶ Frame ─ compare ─▶ verdict
+//! scene.toml ─ Scene::load ─▶ Scene ─ tessellate ─▶ TriScene ─ plan ─▶ backend ─▶ Frame ─ compare ─▶ verdict
+//! ```
+//!
+//! ```no_run
+//! use rendiff::{Backend, Overrides, Prepared};
+//! let job = Prepared::load("scenes/spheres.toml".as_ref(), &Overrides::default())?;
+//! let frame = job.render(Backend::Ray).frame;
+//! frame.write_png("out.png".as_ref(), rendiff::image_io::PngEncoding::Srgb8)?;
+//! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 //!
 //! See `ARCHITECTURE.md` for the conventions, the module map and its
@@ -16,15 +24,236 @@
 
 #![warn(missing_docs, missing_debug_implementations)]
 
+pub mod accel;
 pub mod camera;
 pub mod color;
 pub mod frame;
 pub mod image_io;
 pub mod math;
 pub mod options;
+pub mod plan;
 pub mod polygon;
+pub mod ray;
 pub mod scene;
 pub mod shade;
 pub mod tessellate;
 pub mod texture;
 pub mod tri_scene;
+
+use std::fmt;
+use std::path::Path;
+use std::str::FromStr;
+use std::time::Instant;
+
+use accel::{Accel, AccelOptions};
+use frame::Frame;
+use options::{BvhMode, DepthFormat, Geometry, ShadowMode};
+use plan::Plan;
+use scene::{LoadError, Scene};
+use tessellate::TessOptions;
+use tri_scene::TriScene;
+
+/// The renderers.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Backend {
+    /// The ray caster/tracer.
+    Ray,
+}
+
+impl fmt::Display for Backend {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Backend::Ray => "ray",
+        })
+    }
+}
+
+impl FromStr for Backend {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "ray" => Ok(Backend::Ray),
+            _ => Err(format!("unknown backend \"{s}\"; expected ray")),
+        }
+    }
+}
+
+/// Settings given on the command line; `None` keeps the scene's value.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Overrides {
+    /// `--size WxH`.
+    pub size: Option<(u32, u32)>,
+    /// `--samples N`.
+    pub samples: Option<u32>,
+    /// `--depth`.
+    pub depth: Option<DepthFormat>,
+    /// `--shadows`.
+    pub shadows: Option<ShadowMode>,
+    /// `--geometry`.
+    pub geometry: Option<Geometry>,
+    /// `--bvh` (scene key `ray.bvh`).
+    pub bvh: Option<BvhMode>,
+    /// `--max-depth`.
+    pub max_depth: Option<u32>,
+    /// `--no-plan`.
+    pub no_plan: bool,
+}
+
+/// The resolved settings of one render.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Settings {
+    /// Depth buffer format (raster).
+    pub depth: DepthFormat,
+    /// Shadow mode (raster).
+    pub shadows: ShadowMode,
+    /// Geometry (ray).
+    pub geometry: Geometry,
+    /// BVH mode (ray).
+    pub bvh: BvhMode,
+    /// `max_depth`.
+    pub max_depth: u32,
+    /// The plan is in effect.
+    pub plan: bool,
+}
+
+/// Errors of the library facade.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum Error {
+    /// The scene could not be loaded.
+    #[error(transparent)]
+    Load(#[from] LoadError),
+    /// An image could not be written or read.
+    #[error(transparent)]
+    Image(#[from] image_io::ImageIoError),
+    /// A request that cannot be carried out as given.
+    #[error("{0}")]
+    Usage(String),
+}
+
+/// Half-width of the band around a shading discontinuity that the verdict
+/// treats as a tie (ε_g, DESIGN.md §6; derived in ARCHITECTURE.md).
+pub const GATE_EPS: f32 = 1e-4;
+
+/// A scene loaded, tessellated and planned: ready to render with any backend.
+#[derive(Debug)]
+pub struct Prepared {
+    /// The scene as written.
+    pub scene: Scene,
+    /// Its triangles.
+    pub tri: TriScene,
+    /// The resolved settings.
+    pub settings: Settings,
+    /// The plan (or everything on).
+    pub plan: Plan,
+}
+
+/// A rendered frame and what it cost.
+#[derive(Debug)]
+pub struct Rendered {
+    /// The frame.
+    pub frame: Frame,
+    /// Wall time of the render in milliseconds (build of acceleration
+    /// structures included).
+    pub time_ms: f64,
+}
+
+impl Prepared {
+    /// Loads a scene file and applies the overrides.
+    ///
+    /// # Errors
+    ///
+    /// [`Error::Load`] for a bad scene, [`Error::Usage`] for bad overrides.
+    pub fn load(path: &Path, ov: &Overrides) -> Result<Prepared, Error> {
+        let scene = Scene::load(path)?;
+        Prepared::from_scene(scene, ov)
+    }
+
+    /// Prepares an already loaded scene.
+    ///
+    /// # Errors
+    ///
+    /// As [`Prepared::load`].
+    pub fn from_scene(scene: Scene, ov: &Overrides) -> Result<Prepared, Error> {
+        if let Some((w, h)) = ov.size {
+            let max = scene::MAX_IMAGE_SIDE;
+            if w == 0 || h == 0 || w > max || h > max {
+                return Err(Error::Usage(format!(
+                    "--size {w}x{h}: each side must be 1 … {max}"
+                )));
+            }
+        }
+        if let Some(n) = ov.samples {
+            if ![1, 2, 4, 8, 16].contains(&n) {
+                return Err(Error::Usage(format!(
+                    "--samples {n}: expected 1, 2, 4, 8 or 16"
+                )));
+            }
+        }
+        if let Some(d) = ov.max_depth {
+            if !(1..=64).contains(&d) {
+                return Err(Error::Usage(format!("--max-depth {d}: expected 1 … 64")));
+            }
+        }
+        let tri = tessellate::tessellate(
+            &scene,
+            &TessOptions {
+                size: ov.size,
+                samples: ov.samples,
+            },
+        )?;
+        let settings = Settings {
+            depth: ov.depth.unwrap_or(scene.raster.depth),
+            shadows: ov.shadows.unwrap_or(scene.raster.shadows),
+            geometry: ov.geometry.unwrap_or(scene.ray.geometry),
+            bvh: ov.bvh.unwrap_or(scene.ray.bvh),
+            max_depth: ov.max_depth.unwrap_or(scene.render.max_depth),
+            plan: !ov.no_plan,
+        };
+        let plan = if settings.plan {
+            Plan::for_scene(&tri, settings.bvh, settings.max_depth)
+        } else {
+            Plan::everything(&tri, settings.bvh)
+        };
+        Ok(Prepared {
+            scene,
+            tri,
+            settings,
+            plan,
+        })
+    }
+
+    /// Renders with a backend.
+    #[must_use]
+    pub fn render(&self, backend: Backend) -> Rendered {
+        let start = Instant::now();
+        let frame = match backend {
+            Backend::Ray => {
+                let accel = Accel::new(
+                    &self.tri,
+                    AccelOptions {
+                        geometry: self.settings.geometry,
+                        bvh: self.plan.bvh,
+                    },
+                );
+                let max_depth = if self.plan.ray_tree {
+                    self.settings.max_depth
+                } else {
+                    1
+                };
+                ray::render(
+                    &accel,
+                    &ray::RayOptions {
+                        max_depth,
+                        shadows: self.plan.shadows,
+                        gate_eps: GATE_EPS,
+                    },
+                )
+            }
+        };
+        Rendered {
+            frame,
+            time_ms: start.elapsed().as_secs_f64() * 1e3,
+        }
+    }
+}

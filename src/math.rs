@@ -268,7 +268,11 @@ impl Transform {
         }
         // Singular relative to the largest axis: a transform that squashes
         // one axis by 1e-12 of another is singular for f32 geometry.
-        let largest = lin.x_axis.length().max(lin.y_axis.length()).max(lin.z_axis.length());
+        let largest = lin
+            .x_axis
+            .length()
+            .max(lin.y_axis.length())
+            .max(lin.z_axis.length());
         if det.abs() <= 1e-12 * largest * largest * largest {
             return None;
         }

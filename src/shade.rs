@@ -464,12 +464,12 @@ pub fn shade(ctx: &ShadeContext<'_>, sp: &SurfacePoint, d: Vec3, vis: &dyn Visib
                 highlights += cs * (m.phong * c.powf(m.phong_size));
             }
         }
-        if m.specular > 0.0 {
-            if let Some(h) = (l - d).try_normalize() {
-                let c = h.dot(n);
-                if c > 0.0 {
-                    highlights += cs * (m.specular * c.powf(1.0 / m.roughness));
-                }
+        if m.specular > 0.0
+            && let Some(h) = (l - d).try_normalize()
+        {
+            let c = h.dot(n);
+            if c > 0.0 {
+                highlights += cs * (m.specular * c.powf(1.0 / m.roughness));
             }
         }
     }

@@ -361,8 +361,10 @@ fn box_piece(lo: DVec3, hi: DVec3) -> Piece {
             if i & 4 == 0 { lo.z } else { hi.z },
         )
     };
-    let mut p = Piece::default();
-    p.positions = (0..8).map(corner).collect();
+    let mut p = Piece {
+        positions: (0..8).map(corner).collect(),
+        ..Piece::default()
+    };
     let center = (lo + hi) / 2.0;
     // Each face as a quad of corner indices; orient each triangle outward.
     let faces: [[u32; 4]; 6] = [
@@ -644,10 +646,14 @@ fn append(
             })
             .sum();
         if volume < 0.0 {
-            for k in 0..tris.len() {
-                tris[k].swap(1, 2);
-                piece.tri_normals[k].swap(1, 2);
-                piece.tri_uvs[k].swap(1, 2);
+            for ((t, n), uv) in tris
+                .iter_mut()
+                .zip(&mut piece.tri_normals)
+                .zip(&mut piece.tri_uvs)
+            {
+                t.swap(1, 2);
+                n.swap(1, 2);
+                uv.swap(1, 2);
             }
         }
     }
@@ -728,17 +734,17 @@ fn append(
     }
     let last = u32::try_from(out.tris.len()).unwrap_or(u32::MAX);
     out.bounds = out.bounds.union(bounds);
-    if let Shape::Sphere { center, radius } = &obj.shape {
-        if let Some(s) = tr.uniform_scale() {
-            out.spheres.push(AnalyticSphere {
-                object: object_id,
-                center: tr.point(*center),
-                radius: radius * s,
-                world_to_object: tr.matrix().inverse(),
-                object_center: *center,
-                material: obj.material,
-            });
-        }
+    if let Shape::Sphere { center, radius } = &obj.shape
+        && let Some(s) = tr.uniform_scale()
+    {
+        out.spheres.push(AnalyticSphere {
+            object: object_id,
+            center: tr.point(*center),
+            radius: radius * s,
+            world_to_object: tr.matrix().inverse(),
+            object_center: *center,
+            material: obj.material,
+        });
     }
     out.objects.push(ObjectInfo {
         label: obj.label(),

@@ -822,15 +822,16 @@ impl Loader {
                 ),
             ));
         }
-        if let Pigment::Image(tex) = &m.pigment {
-            if tex.has_alpha() && m.filter + m.transmit > 0.0 {
-                let key = if spans.contains_key("transmit") {
-                    "transmit"
-                } else {
-                    "filter"
-                };
-                return Err(t.err(&here(key), key, "an image pigment with an alpha channel sets transmit = 1 − alpha itself; remove filter/transmit or the alpha channel"));
-            }
+        if let Pigment::Image(tex) = &m.pigment
+            && tex.has_alpha()
+            && m.filter + m.transmit > 0.0
+        {
+            let key = if spans.contains_key("transmit") {
+                "transmit"
+            } else {
+                "filter"
+            };
+            return Err(t.err(&here(key), key, "an image pigment with an alpha channel sets transmit = 1 − alpha itself; remove filter/transmit or the alpha channel"));
         }
         if let Some(bt) = t.table("bump")? {
             let file = bt.req_string("image")?;

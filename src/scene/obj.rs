@@ -225,7 +225,6 @@ pub fn load_obj_bytes(path: &Path, bytes: &[u8]) -> Result<MeshData, LoadError> 
         triangulate: false,
         ignore_points: true,
         ignore_lines: true,
-        ..tobj::LoadOptions::default()
     };
     let mut reader = BufReader::new(text.as_bytes());
     let (models, _materials) =

@@ -1,0 +1,301 @@
+//! Ray queries over a `TriScene`: the BVH, the watertight triangle test,
+//! analytic spheres, and the shadow rays of the [`Visibility`] interface.
+//!
+//! This layer sits below both backends: the ray tracer casts every ray
+//! through it, and the rasterizer answers shadow rays through the same
+//! [`ShadowRays`] (the hybrid of DESIGN.md §3), so both see the same shadows.
+
+pub mod bvh;
+pub mod sphere;
+pub mod triangle;
+
+use crate::color::Rgb;
+use crate::math::{Ray, Vec3, to_f64};
+use crate::options::Geometry;
+use crate::shade::Visibility;
+use crate::tri_scene::TriScene;
+use bvh::Bvh;
+pub use bvh::{BvhHit, BvhStats};
+
+/// What an accelerator is built over.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct AccelOptions {
+    /// Triangles only, or analytic spheres in place of their triangles.
+    pub geometry: Geometry,
+    /// A BVH (`true`) or one flat leaf (`false`).
+    pub bvh: bool,
+}
+
+impl Default for AccelOptions {
+    fn default() -> Self {
+        AccelOptions {
+            geometry: Geometry::Mesh,
+            bvh: true,
+        }
+    }
+}
+
+/// How a primitive acts on a shadow ray.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum ShadowClass {
+    /// Blocks the light.
+    Opaque,
+    /// Multiplies it by `f·P + t`.
+    Transparent,
+    /// Casts no shadow (`no_shadow`).
+    None,
+}
+
+/// A closest hit on a triangle or an analytic sphere.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    /// Ray parameter.
+    pub t: f32,
+    /// Primitive id (triangle id, or `TriScene::sphere_id`).
+    pub prim: u32,
+    /// Barycentrics from the watertight test (zero for spheres).
+    pub b: [f32; 3],
+    /// Exact-ish `t` for sphere hits (f64).
+    pub t64: f64,
+}
+
+/// The ray-query structure of a scene.
+#[derive(Debug)]
+pub struct Accel<'s> {
+    scene: &'s TriScene,
+    bvh: Bvh,
+    /// Analytic spheres in use (indices into `scene.spheres`).
+    spheres: Vec<usize>,
+    class: Vec<ShadowClass>,
+    sphere_class: Vec<ShadowClass>,
+    any_caster: bool,
+}
+
+impl<'s> Accel<'s> {
+    /// Builds the structure for a scene.
+    #[must_use]
+    pub fn new(scene: &'s TriScene, opts: AccelOptions) -> Accel<'s> {
+        let spheres: Vec<usize> = if opts.geometry == Geometry::Analytic {
+            (0..scene.spheres.len()).collect()
+        } else {
+            Vec::new()
+        };
+        let mut analytic_object = vec![false; scene.objects.len()];
+        for &k in &spheres {
+            analytic_object[scene.spheres[k].object as usize] = true;
+        }
+        let ids: Vec<u32> = (0..u32::try_from(scene.len()).unwrap_or(u32::MAX))
+            .filter(|&t| !analytic_object[scene.tri_object[t as usize] as usize])
+            .collect();
+        let bvh = Bvh::build(&ids, |id| scene.triangle(id), !opts.bvh);
+        let class_of = |object: u32, material: u16| {
+            if scene.objects[object as usize].no_shadow {
+                ShadowClass::None
+            } else if scene.materials[usize::from(material)].is_transparent() {
+                ShadowClass::Transparent
+            } else {
+                ShadowClass::Opaque
+            }
+        };
+        let class: Vec<ShadowClass> = (0..scene.len())
+            .map(|t| class_of(scene.tri_object[t], scene.tri_material[t]))
+            .collect();
+        let sphere_class: Vec<ShadowClass> = scene
+            .spheres
+            .iter()
+            .map(|s| class_of(s.object, s.material))
+            .collect();
+        let any_caster = class
+            .iter()
+            .chain(&sphere_class)
+            .any(|c| *c != ShadowClass::None);
+        Accel {
+            scene,
+            bvh,
+            spheres,
+            class,
+            sphere_class,
+            any_caster,
+        }
+    }
+
+    /// The scene.
+    #[must_use]
+    pub fn scene(&self) -> &'s TriScene {
+        self.scene
+    }
+
+    /// BVH statistics.
+    #[must_use]
+    pub fn stats(&self) -> BvhStats {
+        self.bvh.stats()
+    }
+
+    /// The closest hit in `[ray.t_min, ray.t_max]` (ties: lower id).
+    #[must_use]
+    pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
+        let mut best = self.bvh.intersect(ray).map(|h| Hit {
+            t: h.t,
+            prim: h.id,
+            b: h.b,
+            t64: f64::from(h.t),
+        });
+        if !self.spheres.is_empty() {
+            let (o, d) = (to_f64(ray.origin), to_f64(ray.dir));
+            for &k in &self.spheres {
+                let s = &self.scene.spheres[k];
+                let t_max = best.map_or(f64::from(ray.t_max), |h| h.t64);
+                if let Some(t) =
+                    sphere::intersect_sphere(o, d, s.center, s.radius, f64::from(ray.t_min), t_max)
+                {
+                    let prim = self.scene.sphere_id(k);
+                    #[expect(
+                        clippy::cast_possible_truncation,
+                        reason = "f32 copy of the f64 distance"
+                    )]
+                    let t32 = t as f32;
+                    let better = best.is_none_or(|h| t < h.t64 || (t == h.t64 && prim < h.prim));
+                    if better {
+                        best = Some(Hit {
+                            t: t32,
+                            prim,
+                            b: [0.0; 3],
+                            t64: t,
+                        });
+                    }
+                }
+            }
+        }
+        best
+    }
+
+    /// `true` when some primitive casts shadows.
+    #[must_use]
+    pub fn has_casters(&self) -> bool {
+        self.any_caster
+    }
+
+    /// `true` when `p` lies inside the closed object `object` (parity of
+    /// the crossings of a ray in a fixed generic direction).
+    #[must_use]
+    pub fn contains(&self, object: u32, p: Vec3) -> bool {
+        if let Some(&k) = self
+            .spheres
+            .iter()
+            .find(|&&k| self.scene.spheres[k].object == object)
+        {
+            let s = &self.scene.spheres[k];
+            return (to_f64(p) - s.center).length() < s.radius;
+        }
+        let info = &self.scene.objects[object as usize];
+        if !info.closed || !info.bounds.contains(p) {
+            return false;
+        }
+        let ray = Ray {
+            origin: p,
+            dir: Vec3::new(0.577_215_7, 0.318_309_9, 0.751_942_6).normalize(),
+            t_min: 0.0,
+            t_max: f32::INFINITY,
+        };
+        let mut crossings = 0u32;
+        self.bvh.for_each_hit(&ray, |id, _| {
+            if info.tris.contains(&id) {
+                crossings += 1;
+            }
+            false
+        });
+        crossings % 2 == 1
+    }
+}
+
+/// Shadow rays through an [`Accel`]: the [`Visibility`] both backends use.
+#[derive(Debug)]
+pub struct ShadowRays<'a, 's> {
+    accel: &'a Accel<'s>,
+}
+
+impl<'a, 's> ShadowRays<'a, 's> {
+    /// Shadow rays against the given structure.
+    #[must_use]
+    pub fn new(accel: &'a Accel<'s>) -> ShadowRays<'a, 's> {
+        ShadowRays { accel }
+    }
+}
+
+impl Visibility for ShadowRays<'_, '_> {
+    fn transmittance(&self, origin: Vec3, dir: Vec3, t_max: f32) -> Rgb {
+        let a = self.accel;
+        if !a.any_caster {
+            return Rgb::WHITE;
+        }
+        let ray = Ray {
+            origin,
+            dir,
+            t_min: 0.0,
+            t_max,
+        };
+        // Every crossing: (t, id, barycentrics); an opaque one ends it.
+        let mut crossings: Vec<(f32, u32, [f32; 3])> = Vec::new();
+        let mut blocked = false;
+        a.bvh
+            .for_each_hit(&ray, |id, h| match a.class[id as usize] {
+                ShadowClass::Opaque => {
+                    blocked = true;
+                    true
+                }
+                ShadowClass::Transparent => {
+                    crossings.push((h.t, id, h.b));
+                    false
+                }
+                ShadowClass::None => false,
+            });
+        if blocked {
+            return Rgb::BLACK;
+        }
+        let (o, d) = (to_f64(origin), to_f64(dir));
+        for &k in &a.spheres {
+            let s = &a.scene.spheres[k];
+            let Some((t0, t1)) = sphere::sphere_roots(o, d, s.center, s.radius) else {
+                continue;
+            };
+            for t in [t0, t1] {
+                if t > 0.0 && t < f64::from(t_max) {
+                    match a.sphere_class[k] {
+                        ShadowClass::Opaque => return Rgb::BLACK,
+                        ShadowClass::Transparent => {
+                            #[expect(
+                                clippy::cast_possible_truncation,
+                                reason = "f32 copy for ordering"
+                            )]
+                            crossings.push((t as f32, a.scene.sphere_id(k), [0.0; 3]));
+                        }
+                        ShadowClass::None => {}
+                    }
+                }
+            }
+        }
+        if crossings.is_empty() {
+            return Rgb::WHITE;
+        }
+        // Multiply in order of increasing t (ties: lower id): the result
+        // does not depend on the traversal order.
+        crossings.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
+        let scene = a.scene;
+        let mut tr = Rgb::WHITE;
+        for (t, id, b) in crossings {
+            let sp = if (id as usize) < scene.len() {
+                scene.surface_at(id, crate::math::Bary(b))
+            } else {
+                let k = id as usize - scene.len();
+                scene.sphere_surface_at(k, to_f64(ray.at(t)))
+            };
+            let m = &scene.materials[usize::from(sp.material)];
+            let (p, f, t) = m.pigment_at(sp.uv);
+            tr *= p * f + Rgb::splat(t);
+            if tr.is_black() {
+                break;
+            }
+        }
+        tr
+    }
+}

@@ -1,0 +1,245 @@
+//! The commands, each a thin use of the library.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use rendiff::image_io::PngEncoding;
+use rendiff::options::{DepthFormat, Geometry, ShadowMode};
+use rendiff::shade::{LightKind, Pigment};
+use rendiff::{Backend, Overrides, Prepared};
+
+use crate::Outcome;
+use crate::args::{Cli, Command, PlanArgs, RenderArgs, RenderFlags};
+
+/// Runs a parsed command line.
+pub fn run(cli: Cli) -> Result<Outcome> {
+    match cli.command {
+        Command::Render(a) => with_threads(a.flags.threads, || render(&a)),
+        Command::Plan(a) => plan(&a),
+    }
+}
+
+/// Runs `f` on a pool of `threads` workers (all cores when `None`).
+fn with_threads<T: Send>(
+    threads: Option<usize>,
+    f: impl FnOnce() -> Result<T> + Send,
+) -> Result<T> {
+    match threads {
+        None => f(),
+        Some(0) => bail!("--threads 0: expected at least 1"),
+        Some(n) => {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(n)
+                .build()
+                .context("could not start the worker threads")?;
+            pool.install(f)
+        }
+    }
+}
+
+/// The overrides given by the render flags.
+pub fn overrides(flags: &RenderFlags) -> Result<Overrides> {
+    let depth = flags
+        .depth
+        .as_deref()
+        .map(str::parse::<DepthFormat>)
+        .transpose()
+        .map_err(|e| anyhow::anyhow!("--depth: {e}"))?;
+    let shadows = flags
+        .shadows
+        .as_deref()
+        .map(str::parse::<ShadowMode>)
+        .transpose()
+        .map_err(|e| anyhow::anyhow!("--shadows: {e}"))?;
+    let geometry = flags
+        .geometry
+        .as_deref()
+        .map(str::parse::<Geometry>)
+        .transpose()
+        .map_err(|e| anyhow::anyhow!("--geometry: {e}"))?;
+    Ok(Overrides {
+        size: flags.size,
+        samples: flags.samples,
+        depth,
+        shadows,
+        geometry,
+        bvh: None,
+        max_depth: flags.max_depth,
+        no_plan: flags.no_plan,
+    })
+}
+
+fn encoding(flags: &RenderFlags) -> PngEncoding {
+    if flags.linear16 {
+        PngEncoding::Linear16
+    } else {
+        PngEncoding::Srgb8
+    }
+}
+
+fn render(a: &RenderArgs) -> Result<Outcome> {
+    let backend: Backend = a
+        .backend
+        .parse()
+        .map_err(|e: String| anyhow::anyhow!("--backend: {e}"))?;
+    let ov = overrides(&a.flags)?;
+    let job = Prepared::load(&a.scene, &ov)?;
+    for w in &job.tri.warnings {
+        eprintln!("warning: {w}");
+    }
+    let out = a
+        .output
+        .clone()
+        .unwrap_or_else(|| PathBuf::from(format!("{}-{backend}.png", job.scene.name())));
+    check_output_dir(&out)?;
+    let r = job.render(backend);
+    r.frame.write_png(&out, encoding(&a.flags))?;
+    if let Some(dir) = &a.flags.gbuffer {
+        r.frame.write_gbuffer(dir)?;
+    }
+    println!(
+        "{}: {} {}x{} ({} sample{}/pixel) in {:.1} ms -> {}",
+        a.scene.display(),
+        backend,
+        r.frame.width,
+        r.frame.height,
+        r.frame.samples * r.frame.samples,
+        if r.frame.samples == 1 { "" } else { "s" },
+        r.time_ms,
+        out.display()
+    );
+    Ok(Outcome::Ok)
+}
+
+/// An output's folder must exist before a long render starts.
+fn check_output_dir(out: &Path) -> Result<()> {
+    if let Some(dir) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
+        if !dir.is_dir() {
+            bail!(
+                "{}: the output folder {} does not exist",
+                out.display(),
+                dir.display()
+            );
+        }
+    }
+    Ok(())
+}
+
+fn plan(a: &PlanArgs) -> Result<Outcome> {
+    let ov = Overrides {
+        no_plan: a.no_plan,
+        ..Overrides::default()
+    };
+    let job = Prepared::load(&a.scene, &ov)?;
+    print!("{}", describe(&job));
+    Ok(Outcome::Ok)
+}
+
+/// What a scene contains and what the plan decides.
+pub fn describe(job: &Prepared) -> String {
+    let (s, t) = (&job.scene, &job.tri);
+    let mut o = String::new();
+    let cam = &t.camera;
+    let _ = writeln!(o, "scene {}", s.path.display());
+    let _ = writeln!(
+        o,
+        "image {}x{}, {} sample{}/pixel, background {:?}",
+        cam.width(),
+        cam.height(),
+        cam.samples() * cam.samples(),
+        if cam.samples() == 1 { "" } else { "s" },
+        t.background.to_array()
+    );
+    let proj = match cam.projection() {
+        rendiff::camera::Projection::Perspective { tan_half_fov } => {
+            format!(
+                "perspective fov_y {:.4}°",
+                2.0 * tan_half_fov.atan().to_degrees()
+            )
+        }
+        rendiff::camera::Projection::Orthographic { view_height } => {
+            format!("orthographic view_height {view_height}")
+        }
+    };
+    let _ = writeln!(
+        o,
+        "camera {proj}, eye {:?}, forward {:?}, near {}, far {:.6}",
+        cam.eye().to_array(),
+        round3(cam.forward().to_array()),
+        cam.near(),
+        cam.far()
+    );
+    let _ = writeln!(o, "lights {}", t.lights.len());
+    for (i, l) in t.lights.iter().enumerate() {
+        let what = match l.kind {
+            LightKind::Point { position } => format!("point at {:?}", position.to_array()),
+            LightKind::Parallel { direction } => format!(
+                "parallel along {:?}",
+                round3(direction.to_array().map(f64::from))
+            ),
+        };
+        let mut extra = String::new();
+        if l.shadowless {
+            extra.push_str(", shadowless");
+        }
+        if let Some((d, p)) = l.fade {
+            let _ = write!(extra, ", fade {d} power {p}");
+        }
+        let _ = writeln!(o, "  [{i}] {what}, color {:?}{extra}", l.color.to_array());
+    }
+    let _ = writeln!(o, "materials {}", t.materials.len());
+    for m in &t.materials {
+        let pig = match &m.pigment {
+            Pigment::Color(c) => format!("{:?}", c.to_array()),
+            Pigment::Image(tex) => format!("image {}x{}", tex.width(), tex.height()),
+        };
+        let _ = writeln!(
+            o,
+            "  {}: pigment {pig}, ambient {} diffuse {} phong {} specular {} reflection {} filter {} transmit {} ior {}{}",
+            m.name,
+            m.ambient,
+            m.diffuse,
+            m.phong,
+            m.specular,
+            m.reflection,
+            m.filter,
+            m.transmit,
+            m.ior,
+            if m.bump.is_some() { ", bump" } else { "" }
+        );
+    }
+    let _ = writeln!(o, "objects {}, triangles {}", t.objects.len(), t.len());
+    for info in &t.objects {
+        let b = info.bounds;
+        let _ = writeln!(
+            o,
+            "  {}: {} triangles{}, {}{}{}, bounds {:?} .. {:?}",
+            info.label,
+            info.tris.len(),
+            info.segments
+                .map(|n| format!(" ({n} segments)"))
+                .unwrap_or_default(),
+            if info.closed { "closed" } else { "open" },
+            if info.smooth { ", smooth" } else { "" },
+            if info.no_shadow { ", no_shadow" } else { "" },
+            round3(b.min.to_array().map(f64::from)),
+            round3(b.max.to_array().map(f64::from)),
+        );
+    }
+    let _ = writeln!(
+        o,
+        "plan{}",
+        if job.settings.plan {
+            ""
+        } else {
+            " (--no-plan)"
+        }
+    );
+    o.push_str(&job.plan.to_string());
+    o
+}
+
+fn round3(v: [f64; 3]) -> [f64; 3] {
+    v.map(|x| (x * 1000.0).round() / 1000.0 + 0.0)
+}

@@ -1,0 +1,275 @@
+//! Backend B: the ray caster/tracer.
+//!
+//! 1. Primary rays through the sample points of DESIGN.md §2, starting where
+//!    they cross the near plane.
+//! 2. The closest hit from the [`Accel`] (watertight triangles, ties to the
+//!    lower id; analytic spheres with `--geometry analytic`).
+//! 3. Barycentrics refined in `f64` on the hit triangle (for primary rays
+//!    with the `f64` camera ray), so they agree with the rasterizer's
+//!    perspective-correct ones to ~1e-12 before the one rounding to `f32`.
+//! 4. `TriScene::surface_at` → `shade::shade`, with hard shadows through
+//!    [`ShadowRays`].
+//! 5. The ray tree with POV-Ray's semantics: additive reflection,
+//!    refraction by the ray's list of refracting objects it is inside,
+//!    total internal reflection added unfiltered, nothing at the depth limit.
+//!
+//! Parallel over 16×16-sample tiles with rayon; every sample is computed
+//! independently, so the output is bit-identical for any thread count.
+
+use rayon::prelude::*;
+
+use crate::accel::triangle::plane_barycentrics;
+use crate::accel::{Accel, Hit, ShadowRays};
+use crate::color::Rgb;
+use crate::frame::{BACKGROUND, Frame};
+use crate::math::{Bary, DVec3, Ray, Vec3, to_f64};
+use crate::shade::{self, ShadeContext, Shaded, SurfacePoint};
+use crate::tri_scene::TriScene;
+
+/// Options of the ray tracer.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RayOptions {
+    /// `max_depth` (POV-Ray's `max_trace_level`; 1 = no ray tree).
+    pub max_depth: u32,
+    /// Cast shadow rays (the plan turns them off where nothing can shadow).
+    pub shadows: bool,
+    /// Half-width of the band flagged as a discontinuity (ε_g).
+    pub gate_eps: f32,
+}
+
+/// Tile side in samples.
+const TILE: u32 = 16;
+
+/// Straight continuations through `ior = 1` surfaces do not use up depth
+/// (POV-Ray); this bounds them per path so no scene can recurse without end.
+const MAX_STRAIGHT: u32 = 64;
+
+struct Tracer<'a, 's> {
+    accel: &'a Accel<'s>,
+    scene: &'s TriScene,
+    ctx: ShadeContext<'s>,
+    vis: ShadowRays<'a, 's>,
+    max_depth: u32,
+    /// Refracting objects that contain the eye (outermost first).
+    eye_inside: Vec<u32>,
+}
+
+/// One sample's result.
+#[derive(Clone, Copy, Debug)]
+struct SampleOut {
+    color: Rgb,
+    depth: f32,
+    id: u32,
+    flags: u32,
+}
+
+/// Renders a scene with the given accelerator.
+#[must_use]
+pub fn render(accel: &Accel<'_>, opts: &RayOptions) -> Frame {
+    let scene = accel.scene();
+    let cam = &scene.camera;
+    let ctx = ShadeContext {
+        materials: &scene.materials,
+        lights: &scene.lights,
+        ambient_light: scene.ambient_light,
+        gate_eps: opts.gate_eps,
+        shadows: opts.shadows,
+    };
+    let eye = cam.eye_f32();
+    let mut eye_inside: Vec<u32> = (0..u32::try_from(scene.objects.len()).unwrap_or(0))
+        .filter(|&o| {
+            let info = &scene.objects[o as usize];
+            let m = &scene.materials[usize::from(info.material)];
+            m.is_transparent() && m.ior != 1.0 && accel.contains(o, eye)
+        })
+        .collect();
+    // Outermost first: the larger bounds contain the smaller.
+    eye_inside.sort_by(|&a, &b| {
+        let va = scene.objects[a as usize].bounds.half_area();
+        let vb = scene.objects[b as usize].bounds.half_area();
+        vb.total_cmp(&va).then(a.cmp(&b))
+    });
+    let tracer = Tracer {
+        accel,
+        scene,
+        ctx,
+        vis: ShadowRays::new(accel),
+        max_depth: opts.max_depth.max(1),
+        eye_inside,
+    };
+    let (sw, sh) = (cam.sample_width(), cam.sample_height());
+    let tiles_x = sw.div_ceil(TILE);
+    let tiles_y = sh.div_ceil(TILE);
+    let tiles: Vec<(u32, u32)> = (0..tiles_y)
+        .flat_map(|ty| (0..tiles_x).map(move |tx| (tx, ty)))
+        .collect();
+    let results: Vec<Vec<SampleOut>> = tiles
+        .par_iter()
+        .map(|&(tx, ty)| {
+            let mut out = Vec::with_capacity((TILE * TILE) as usize);
+            for sy in ty * TILE..((ty + 1) * TILE).min(sh) {
+                for sx in tx * TILE..((tx + 1) * TILE).min(sw) {
+                    out.push(tracer.sample(sx, sy));
+                }
+            }
+            out
+        })
+        .collect();
+    let mut frame = Frame::new(cam.width(), cam.height(), cam.samples(), scene.background);
+    for (&(tx, ty), res) in tiles.iter().zip(&results) {
+        let mut k = 0;
+        for sy in ty * TILE..((ty + 1) * TILE).min(sh) {
+            for sx in tx * TILE..((tx + 1) * TILE).min(sw) {
+                let i = (sy as usize) * (sw as usize) + sx as usize;
+                let s = res[k];
+                k += 1;
+                frame.sample_color[i] = s.color;
+                frame.depth[i] = s.depth;
+                frame.id[i] = s.id;
+                frame.flags[i] = s.flags;
+            }
+        }
+    }
+    frame.resolve();
+    frame
+}
+
+/// A colour with non-finite channels replaced by 0: never a NaN pixel.
+fn sanitize(c: Rgb) -> Rgb {
+    let f = |v: f32| if v.is_finite() { v } else { 0.0 };
+    Rgb::new(f(c.r), f(c.g), f(c.b))
+}
+
+impl Tracer<'_, '_> {
+    fn sample(&self, sx: u32, sy: u32) -> SampleOut {
+        let cam = &self.scene.camera;
+        let (x, y) = cam.sample_point(sx, sy);
+        let (o64, d64) = cam.primary_ray_f64(x, y);
+        let ray = cam.primary_ray(x, y);
+        let Some(hit) = self.accel.intersect(&ray) else {
+            return SampleOut {
+                color: self.scene.background,
+                depth: f32::INFINITY,
+                id: BACKGROUND,
+                flags: 0,
+            };
+        };
+        let (sp, p64) = self.surface(&hit, o64, d64, &ray);
+        let shaded = shade::shade(&self.ctx, &sp, ray.dir, &self.vis);
+        let mut inside = self.eye_inside.clone();
+        let color = shaded.local + self.children(&sp, &shaded, ray.dir, 1, &mut inside, 0);
+        #[expect(clippy::cast_possible_truncation, reason = "frame depth is f32")]
+        let depth = cam.frame_depth(p64) as f32;
+        SampleOut {
+            color: sanitize(color),
+            depth,
+            id: hit.prim,
+            flags: shaded.flags,
+        }
+    }
+
+    /// Shading inputs and the f64 hit point of a hit of the ray `(o, d)`.
+    fn surface(&self, hit: &Hit, o: DVec3, d: DVec3, ray: &Ray) -> (SurfacePoint, DVec3) {
+        let scene = self.scene;
+        if (hit.prim as usize) < scene.len() {
+            let v = scene.triangle_f64(hit.prim);
+            let b64 = plane_barycentrics(o, d, v).map_or_else(|| hit.b.map(f64::from), |(b, _)| b);
+            let p64 = v[0] * b64[0] + v[1] * b64[1] + v[2] * b64[2];
+            (scene.surface_at(hit.prim, Bary::from_f64(b64)), p64)
+        } else {
+            let k = hit.prim as usize - scene.len();
+            let p64 = to_f64(ray.origin) + to_f64(ray.dir) * hit.t64;
+            (scene.sphere_surface_at(k, p64), p64)
+        }
+    }
+
+    /// Colour along a secondary ray at trace level `level`.
+    fn trace(&self, ray: &Ray, level: u32, inside: &mut Vec<u32>, straight: u32) -> Rgb {
+        let Some(hit) = self.accel.intersect(ray) else {
+            return self.scene.background;
+        };
+        let (sp, _) = self.surface(&hit, to_f64(ray.origin), to_f64(ray.dir), ray);
+        let shaded = shade::shade(&self.ctx, &sp, ray.dir, &self.vis);
+        shaded.local + self.children(&sp, &shaded, ray.dir, level, inside, straight)
+    }
+
+    fn spawn(sp: &SurfacePoint, dir: Vec3) -> Ray {
+        Ray {
+            origin: shade::offset_origin(sp.p, sp.p_error, sp.ng, dir),
+            dir,
+            t_min: 0.0,
+            t_max: f32::INFINITY,
+        }
+    }
+
+    /// Reflection and transmission at a hit of trace level `level`.
+    fn children(
+        &self,
+        sp: &SurfacePoint,
+        shaded: &Shaded,
+        d: Vec3,
+        level: u32,
+        inside: &mut Vec<u32>,
+        straight: u32,
+    ) -> Rgb {
+        if level >= self.max_depth {
+            return Rgb::BLACK;
+        }
+        let m = &self.scene.materials[usize::from(sp.material)];
+        let mut c = Rgb::BLACK;
+        let mut total_internal = false;
+        if !shaded.transmit.is_black() {
+            if m.ior == 1.0 {
+                // POV-Ray: through an ior-1 surface the ray goes on straight
+                // and the trace level is not used up.
+                if straight < MAX_STRAIGHT {
+                    let ray = Self::spawn(sp, d);
+                    c += shaded.transmit * self.trace(&ray, level, inside, straight + 1);
+                }
+            } else {
+                let obj = sp.object;
+                let ior_of = |o: u32| {
+                    let info = &self.scene.objects[o as usize];
+                    self.scene.materials[usize::from(info.material)].ior
+                };
+                let current = inside.last().map_or(1.0, |&o| ior_of(o));
+                let leaving = inside.contains(&obj);
+                let next = if leaving {
+                    inside
+                        .iter()
+                        .rev()
+                        .find(|&&o| o != obj)
+                        .map_or(1.0, |&o| ior_of(o))
+                } else {
+                    m.ior
+                };
+                let eta = current / next;
+                match shade::refract(d, shaded.normal, eta) {
+                    Some(t) => {
+                        let mut child_inside = inside.clone();
+                        if leaving {
+                            child_inside.retain(|&o| o != obj);
+                        } else {
+                            child_inside.push(obj);
+                        }
+                        let ray = Self::spawn(sp, t);
+                        c += shaded.transmit
+                            * self.trace(&ray, level + 1, &mut child_inside, straight);
+                    }
+                    None => {
+                        // Total internal reflection: the mirror ray, added
+                        // unfiltered, staying inside; no `reflection` here.
+                        total_internal = true;
+                        let ray = Self::spawn(sp, shade::reflect(d, shaded.normal));
+                        c += self.trace(&ray, level + 1, inside, straight);
+                    }
+                }
+            }
+        }
+        if shaded.reflection > 0.0 && !total_internal {
+            let ray = Self::spawn(sp, shade::reflect(d, shaded.normal));
+            c += self.trace(&ray, level + 1, inside, straight) * shaded.reflection;
+        }
+        c
+    }
+}
