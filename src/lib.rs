@@ -183,18 +183,16 @@ impl Prepared {
                 )));
             }
         }
-        if let Some(n) = ov.samples {
-            if ![1, 2, 4, 8, 16].contains(&n) {
+        if let Some(n) = ov.samples
+            && ![1, 2, 4, 8, 16].contains(&n) {
                 return Err(Error::Usage(format!(
                     "--samples {n}: expected 1, 2, 4, 8 or 16"
                 )));
             }
-        }
-        if let Some(d) = ov.max_depth {
-            if !(1..=64).contains(&d) {
+        if let Some(d) = ov.max_depth
+            && !(1..=64).contains(&d) {
                 return Err(Error::Usage(format!("--max-depth {d}: expected 1 … 64")));
             }
-        }
         let tri = tessellate::tessellate(
             &scene,
             &TessOptions {

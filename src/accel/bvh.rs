@@ -418,11 +418,10 @@ impl Bvh {
         let mut t_max = ray.t_max;
         self.traverse(ray, &mut t_max, false, |first, count, t_max| {
             for i in first..first + count {
-                if let Some(h) = intersect(&pre, &self.verts[i], ray.t_min, *t_max) {
-                    if visit(self.ids[i], h) {
+                if let Some(h) = intersect(&pre, &self.verts[i], ray.t_min, *t_max)
+                    && visit(self.ids[i], h) {
                         return true;
                     }
-                }
             }
             false
         });
@@ -509,9 +508,9 @@ impl Bvh {
             // Push hit children far to near so the nearest is popped first.
             let mut order: [(f32, usize); 4] = [(0.0, 0); 4];
             let mut m = 0;
-            for k in 0..4 {
+            for (k, &t) in tn.iter().enumerate() {
                 if mask & (1 << k) != 0 {
-                    order[m] = (tn[k], k);
+                    order[m] = (t, k);
                     m += 1;
                 }
             }

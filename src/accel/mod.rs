@@ -193,7 +193,7 @@ impl<'s> Accel<'s> {
         }
         let ray = Ray {
             origin: p,
-            dir: Vec3::new(0.577_215_7, 0.318_309_9, 0.751_942_6).normalize(),
+            dir: Vec3::new(0.577_215_7, 0.291_3, 0.751_942_6).normalize(),
             t_min: 0.0,
             t_max: f32::INFINITY,
         };
