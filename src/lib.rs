@@ -27,12 +27,14 @@
 pub mod accel;
 pub mod camera;
 pub mod color;
+pub mod coverage;
 pub mod frame;
 pub mod image_io;
 pub mod math;
 pub mod options;
 pub mod plan;
 pub mod polygon;
+pub mod raster;
 pub mod ray;
 pub mod scene;
 pub mod shade;
@@ -56,6 +58,8 @@ use tri_scene::TriScene;
 /// The renderers.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Backend {
+    /// The scanline z-buffer rasterizer.
+    Raster,
     /// The ray caster/tracer.
     Ray,
 }
@@ -63,6 +67,7 @@ pub enum Backend {
 impl fmt::Display for Backend {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(match self {
+            Backend::Raster => "raster",
             Backend::Ray => "ray",
         })
     }
@@ -72,8 +77,9 @@ impl FromStr for Backend {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
         match s {
+            "raster" => Ok(Backend::Raster),
             "ray" => Ok(Backend::Ray),
-            _ => Err(format!("unknown backend \"{s}\"; expected ray")),
+            _ => Err(format!("unknown backend \"{s}\"; expected raster or ray")),
         }
     }
 }
@@ -184,15 +190,17 @@ impl Prepared {
             }
         }
         if let Some(n) = ov.samples
-            && ![1, 2, 4, 8, 16].contains(&n) {
-                return Err(Error::Usage(format!(
-                    "--samples {n}: expected 1, 2, 4, 8 or 16"
-                )));
-            }
+            && ![1, 2, 4, 8, 16].contains(&n)
+        {
+            return Err(Error::Usage(format!(
+                "--samples {n}: expected 1, 2, 4, 8 or 16"
+            )));
+        }
         if let Some(d) = ov.max_depth
-            && !(1..=64).contains(&d) {
-                return Err(Error::Usage(format!("--max-depth {d}: expected 1 … 64")));
-            }
+            && !(1..=64).contains(&d)
+        {
+            return Err(Error::Usage(format!("--max-depth {d}: expected 1 … 64")));
+        }
         let tri = tessellate::tessellate(
             &scene,
             &TessOptions {
@@ -221,11 +229,26 @@ impl Prepared {
         })
     }
 
+    /// The rasterizer's options under this plan.
+    #[must_use]
+    pub fn raster_options(&self) -> raster::RasterOptions {
+        raster::RasterOptions {
+            depth: self.settings.depth,
+            shadows: self.settings.shadows,
+            shadows_needed: self.plan.shadows,
+            gate_eps: GATE_EPS,
+            frustum_cull: self.plan.frustum_cull.clone(),
+            backface_cull: self.plan.backface_cull.clone(),
+            perturb: raster::Perturb::default(),
+        }
+    }
+
     /// Renders with a backend.
     #[must_use]
     pub fn render(&self, backend: Backend) -> Rendered {
         let start = Instant::now();
         let frame = match backend {
+            Backend::Raster => raster::render(&self.tri, &self.raster_options()).0,
             Backend::Ray => {
                 let accel = Accel::new(
                     &self.tri,

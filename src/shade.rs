@@ -244,8 +244,9 @@ pub struct SurfacePoint {
 /// segment. Opaque occluders give black; transparent ones multiply by
 /// `f·P + t` at every crossing, in order of increasing t (ties: lower id).
 pub trait Visibility: Sync {
-    /// Transmittance of the segment `origin + t·dir`, `0 < t < t_max`.
-    fn transmittance(&self, origin: Vec3, dir: Vec3, t_max: f32) -> Rgb;
+    /// Transmittance toward light `light` of the segment `origin + t·dir`,
+    /// `0 < t < t_max`.
+    fn transmittance(&self, light: usize, origin: Vec3, dir: Vec3, t_max: f32) -> Rgb;
 }
 
 /// A visibility that never blocks (for shadowless renders and tests).
@@ -253,7 +254,7 @@ pub trait Visibility: Sync {
 pub struct Unoccluded;
 
 impl Visibility for Unoccluded {
-    fn transmittance(&self, _origin: Vec3, _dir: Vec3, _t_max: f32) -> Rgb {
+    fn transmittance(&self, _light: usize, _origin: Vec3, _dir: Vec3, _t_max: f32) -> Rgb {
         Rgb::WHITE
     }
 }
@@ -444,7 +445,7 @@ pub fn shade(ctx: &ShadeContext<'_>, sp: &SurfacePoint, d: Vec3, vis: &dyn Visib
             } else {
                 f32::INFINITY
             };
-            let tr = vis.transmittance(origin, l, t_max);
+            let tr = vis.transmittance(i, origin, l, t_max);
             if tr != Rgb::WHITE {
                 flags |= shadow_flag(i);
             }
@@ -562,7 +563,7 @@ mod tests {
     /// Blocks every shadow ray.
     struct Wall;
     impl Visibility for Wall {
-        fn transmittance(&self, _: Vec3, _: Vec3, _: f32) -> Rgb {
+        fn transmittance(&self, _: usize, _: Vec3, _: Vec3, _: f32) -> Rgb {
             Rgb::BLACK
         }
     }

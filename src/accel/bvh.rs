@@ -419,9 +419,10 @@ impl Bvh {
         self.traverse(ray, &mut t_max, false, |first, count, t_max| {
             for i in first..first + count {
                 if let Some(h) = intersect(&pre, &self.verts[i], ray.t_min, *t_max)
-                    && visit(self.ids[i], h) {
-                        return true;
-                    }
+                    && visit(self.ids[i], h)
+                {
+                    return true;
+                }
             }
             false
         });

@@ -223,7 +223,7 @@ impl<'a, 's> ShadowRays<'a, 's> {
 }
 
 impl Visibility for ShadowRays<'_, '_> {
-    fn transmittance(&self, origin: Vec3, dir: Vec3, t_max: f32) -> Rgb {
+    fn transmittance(&self, _light: usize, origin: Vec3, dir: Vec3, t_max: f32) -> Rgb {
         let a = self.accel;
         if !a.any_caster {
             return Rgb::WHITE;

@@ -66,7 +66,7 @@ pub struct RenderFlags {
 pub struct RenderArgs {
     /// The scene file (.toml).
     pub scene: PathBuf,
-    /// The renderer: ray.
+    /// The renderer: raster or ray.
     #[arg(long, default_value = "ray")]
     pub backend: String,
     /// Output PNG (default: NAME-BACKEND.png in the current folder).

@@ -115,13 +115,14 @@ fn render(a: &RenderArgs) -> Result<Outcome> {
 /// An output's folder must exist before a long render starts.
 fn check_output_dir(out: &Path) -> Result<()> {
     if let Some(dir) = out.parent().filter(|p| !p.as_os_str().is_empty())
-        && !dir.is_dir() {
-            bail!(
-                "{}: the output folder {} does not exist",
-                out.display(),
-                dir.display()
-            );
-        }
+        && !dir.is_dir()
+    {
+        bail!(
+            "{}: the output folder {} does not exist",
+            out.display(),
+            dir.display()
+        );
+    }
     Ok(())
 }
 

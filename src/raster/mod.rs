@@ -1,0 +1,598 @@
+//! Backend A: the scanline z-buffer rasterizer.
+//!
+//! 1. **Transform**: every vertex to homogeneous screen space `(X·w, Y·w, w)`
+//!    in `f64`, with the ray tracer's camera.
+//! 2. **Setup** (parallel over triangles, in id order): frustum and
+//!    back-face culling where the plan allows it, homogeneous clipping
+//!    against the near plane (and a guard band where needed), snapping to
+//!    1/256 pixel ([`crate::coverage`]); every sub-triangle that covers a
+//!    sample row becomes a compact record, binned to fixed bands of sample
+//!    rows.
+//! 3. **Visibility** (parallel over bands): per record, the coverage rule's
+//!    exact integer DDA gives the covered span of every sample row; along
+//!    the span the perspective-correct plane values `λ_i = b_i/w` of the
+//!    *unsnapped* triangle and the depth plane are stepped incrementally
+//!    in `f64`, re-anchored by direct evaluation at every span start. The
+//!    depth test compares (depth key, triangle id), so equal depths go to
+//!    the lower id whatever the drawing order.
+//! 4. **Deferred shading** (parallel over rows): each visible sample is
+//!    shaded once through `TriScene::surface_at` and `shade::shade` with
+//!    the sample's primary-ray direction; shadows by the same shadow rays
+//!    as the ray tracer, or a shadow map.
+//!
+//! Bands have a fixed height (independent of the thread count) and each
+//! sample is written by one band only, so the output is bit-identical for
+//! any number of threads.
+
+pub mod clip;
+pub mod shadow_map;
+
+use rayon::prelude::*;
+
+use crate::accel::{Accel, AccelOptions, ShadowRays};
+use crate::camera::Projection;
+use crate::color::Rgb;
+use crate::coverage::{SampleGrid, SnappedTri};
+use crate::frame::{BACKGROUND, Frame};
+use crate::math::{Bary, DVec3, to_f64};
+use crate::options::{DepthFormat, ShadowMode};
+use crate::shade::{self, ShadeContext, Unoccluded, Visibility};
+use crate::tri_scene::TriScene;
+use clip::{HVert, clip_polygon, planes};
+
+/// Sample rows per band.
+const BAND: u32 = 32;
+/// Guard band around the screen (pixels); beyond it triangles are clipped.
+/// With sides ≤ 16384 px every snapped coordinate stays below 2¹⁷ px,
+/// far inside [`crate::coverage::MAX_SNAPPED`].
+const GUARD_PX: f64 = 65_536.0;
+
+/// Test-only perturbations for the verdict's negative controls.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Perturb {
+    /// Shift every projected vertex by this many pixels in x and y.
+    pub offset_px: f64,
+}
+
+/// Options of the rasterizer.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RasterOptions {
+    /// Depth buffer format.
+    pub depth: DepthFormat,
+    /// Shadows by rays or a shadow map.
+    pub shadows: ShadowMode,
+    /// The plan allows shadows at all.
+    pub shadows_needed: bool,
+    /// ε_g for the shading flags.
+    pub gate_eps: f32,
+    /// Per object: skip for primary visibility (outside the frustum).
+    pub frustum_cull: Vec<bool>,
+    /// Per object: cull back faces.
+    pub backface_cull: Vec<bool>,
+    /// Test-only perturbation.
+    pub perturb: Perturb,
+}
+
+/// Counters of one render.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RasterStats {
+    /// Triangles considered.
+    pub triangles: usize,
+    /// Sub-triangles that reached scan conversion.
+    pub records: usize,
+    /// Samples that passed the depth test (including overwritten ones).
+    pub depth_writes: u64,
+    /// Samples tested.
+    pub fragments: u64,
+}
+
+/// A record of a (sub-)triangle to scan: snapped vertices, its triangle
+/// id and its sample-row range.
+#[derive(Clone, Copy, Debug)]
+struct Record {
+    x: [i32; 3],
+    y: [i32; 3],
+    tri: u32,
+    rows: (u32, u32),
+}
+
+/// Interpolation planes of a triangle: `λ_i = b_i/w` and the depth plane,
+/// each `m0·X + m1·Y + m2` relative to an anchor `(ax, ay)` (pixels).
+#[derive(Clone, Copy, Debug)]
+struct Planes {
+    lambda: [[f64; 3]; 3],
+    depth: [f64; 3],
+    ax: f64,
+    ay: f64,
+}
+
+impl Planes {
+    fn eval(p: &[f64; 3], dx: f64, dy: f64) -> f64 {
+        p[0] * dx + p[1] * dy + p[2]
+    }
+}
+
+/// The visibility buffers of the sample grid.
+#[derive(Clone, Debug)]
+pub struct VisibilityBuffers {
+    /// Depth key per sample (smaller is nearer; `u32::MAX` empty).
+    pub key: Vec<u32>,
+    /// Triangle id per sample ([`BACKGROUND`] empty).
+    pub id: Vec<u32>,
+    /// Barycentrics per sample (from the stepped planes).
+    pub bary: Vec<[f32; 3]>,
+    /// Counters.
+    pub stats: RasterStats,
+}
+
+/// Maps the stepped depth value to the format's key (smaller = nearer).
+#[derive(Clone, Copy, Debug)]
+struct DepthMap {
+    format: DepthFormat,
+    perspective: bool,
+    near: f64,
+    far: f64,
+}
+
+impl DepthMap {
+    /// `v` is 1/z (perspective) or z (orthographic).
+    #[inline]
+    #[expect(
+        clippy::cast_possible_truncation,
+        clippy::cast_sign_loss,
+        reason = "quantisation to the depth format, clamped to its range first"
+    )]
+    fn key(&self, v: f64) -> u32 {
+        match self.format {
+            DepthFormat::F32 => {
+                // Reversed-Z: near/z (perspective), 1 − (z − near)/(far − near).
+                let r = if self.perspective {
+                    self.near * v
+                } else {
+                    1.0 - (v - self.near) / (self.far - self.near)
+                };
+                let f = r as f32;
+                // Larger reversed value is nearer: order-preserving bits, inverted.
+                let bits = f.to_bits();
+                let ordered = if bits >> 31 == 1 {
+                    !bits
+                } else {
+                    bits | 0x8000_0000
+                };
+                u32::MAX - 1 - ordered.min(u32::MAX - 1)
+            }
+            DepthFormat::U24 | DepthFormat::U16 => {
+                let bits = self.format.bits().unwrap_or(24);
+                let max = f64::from((1u32 << bits) - 1);
+                let q = if self.perspective {
+                    (1.0 / self.near - v) / (1.0 / self.near - 1.0 / self.far)
+                } else {
+                    (v - self.near) / (self.far - self.near)
+                };
+                let k = (q.max(0.0) * max).round().min(max - 1.0);
+                k as u32
+            }
+        }
+    }
+}
+
+/// Renders a scene.
+#[must_use]
+pub fn render(scene: &TriScene, opts: &RasterOptions) -> (Frame, RasterStats) {
+    let vis = visibility(scene, opts);
+    let stats = vis.stats;
+    let frame = shade_pass(scene, opts, &vis);
+    (frame, stats)
+}
+
+fn homogeneous(scene: &TriScene, perturb: Perturb) -> Vec<HVert> {
+    let cam = &scene.camera;
+    let (w, h) = (f64::from(cam.width()), f64::from(cam.height()));
+    let (e, f, r, u) = (cam.eye(), cam.forward(), cam.right(), cam.up());
+    let a = cam.aspect();
+    let off = perturb.offset_px;
+    scene
+        .positions
+        .par_iter()
+        .map(|p| {
+            let rel = to_f64(*p) - e;
+            let (xc, yc, zc) = (rel.dot(r), rel.dot(u), rel.dot(f));
+            match cam.projection() {
+                Projection::Perspective { tan_half_fov: t } => HVert {
+                    xh: (xc / (t * a) + zc) * w / 2.0 + off * zc,
+                    yh: (zc - yc / t) * h / 2.0 + off * zc,
+                    w: zc,
+                    z: zc,
+                },
+                Projection::Orthographic { view_height: vh } => HVert {
+                    xh: (xc / (vh * a / 2.0) + 1.0) * w / 2.0 + off,
+                    yh: (1.0 - yc / (vh / 2.0)) * h / 2.0 + off,
+                    w: 1.0,
+                    z: zc,
+                },
+            }
+        })
+        .collect()
+}
+
+/// The visibility pass alone: depth keys, ids and barycentrics per sample.
+#[must_use]
+pub fn visibility(scene: &TriScene, opts: &RasterOptions) -> VisibilityBuffers {
+    let cam = &scene.camera;
+    let n = cam.samples();
+    let grid = SampleGrid::new(n);
+    let (sw, sh) = (cam.sample_width(), cam.sample_height());
+    let hv = homogeneous(scene, opts.perturb);
+    let perspective = matches!(cam.projection(), Projection::Perspective { .. });
+    let clip_planes = planes(
+        cam.near(),
+        f64::from(cam.width()),
+        f64::from(cam.height()),
+        GUARD_PX,
+    );
+
+    // Setup: per chunk of triangles, in id order.
+    let chunk = 4096usize;
+    let n_tris = scene.len();
+    let chunks: Vec<Vec<Record>> = (0..n_tris.div_ceil(chunk))
+        .into_par_iter()
+        .map(|c| {
+            let mut out = Vec::new();
+            let mut poly = Vec::with_capacity(8);
+            let mut tmp = Vec::with_capacity(8);
+            for t in c * chunk..((c + 1) * chunk).min(n_tris) {
+                let obj = scene.tri_object[t] as usize;
+                if opts.frustum_cull.get(obj).copied().unwrap_or(false) {
+                    continue;
+                }
+                let cull_back = opts.backface_cull.get(obj).copied().unwrap_or(false);
+                let tri_id = u32::try_from(t).unwrap_or(u32::MAX);
+                let idx = scene.tris[t];
+                let v = idx.map(|i| hv[i as usize]);
+                setup_triangle(
+                    &v,
+                    tri_id,
+                    cull_back,
+                    &clip_planes,
+                    &grid,
+                    (sw, sh),
+                    &mut poly,
+                    &mut tmp,
+                    &mut out,
+                );
+            }
+            out
+        })
+        .collect();
+    let records: Vec<Record> = chunks.into_iter().flatten().collect();
+
+    // Bin records to bands.
+    let bands = sh.div_ceil(BAND) as usize;
+    let mut counts = vec![0usize; bands + 1];
+    for r in &records {
+        for b in (r.rows.0 / BAND)..=((r.rows.1 - 1) / BAND) {
+            counts[b as usize + 1] += 1;
+        }
+    }
+    for b in 0..bands {
+        counts[b + 1] += counts[b];
+    }
+    let mut lists = vec![0u32; counts[bands]];
+    let mut fill = counts.clone();
+    for (k, r) in records.iter().enumerate() {
+        for b in (r.rows.0 / BAND)..=((r.rows.1 - 1) / BAND) {
+            lists[fill[b as usize]] = u32::try_from(k).unwrap_or(u32::MAX);
+            fill[b as usize] += 1;
+        }
+    }
+
+    let total = (sw as usize) * (sh as usize);
+    let mut key = vec![u32::MAX; total];
+    let mut id = vec![BACKGROUND; total];
+    let mut bary = vec![[0.0f32; 3]; total];
+    let depth_map = DepthMap {
+        format: opts.depth,
+        perspective,
+        near: cam.near(),
+        far: cam.far(),
+    };
+    let band_len = (BAND * sw) as usize;
+    let counters: Vec<(u64, u64)> = key
+        .par_chunks_mut(band_len)
+        .zip(id.par_chunks_mut(band_len))
+        .zip(bary.par_chunks_mut(band_len))
+        .enumerate()
+        .map(|(b, ((key, id), bary))| {
+            let row0 = u32::try_from(b).unwrap_or(0) * BAND;
+            let rows = row0..(row0 + BAND).min(sh);
+            let mut writes = 0u64;
+            let mut frags = 0u64;
+            for &k in &lists[counts[b]..counts[b + 1]] {
+                let r = &records[k as usize];
+                let (w, f) = scan_record(
+                    scene,
+                    &hv,
+                    r,
+                    &grid,
+                    rows.clone(),
+                    sw,
+                    perspective,
+                    &depth_map,
+                    key,
+                    id,
+                    bary,
+                );
+                writes += w;
+                frags += f;
+            }
+            (writes, frags)
+        })
+        .collect();
+    let stats = RasterStats {
+        triangles: n_tris,
+        records: records.len(),
+        depth_writes: counters.iter().map(|c| c.0).sum(),
+        fragments: counters.iter().map(|c| c.1).sum(),
+    };
+    VisibilityBuffers {
+        key,
+        id,
+        bary,
+        stats,
+    }
+}
+
+#[expect(
+    clippy::too_many_arguments,
+    reason = "the inner loop's state, passed once per triangle"
+)]
+fn setup_triangle(
+    v: &[HVert; 3],
+    tri: u32,
+    cull_back: bool,
+    clip_planes: &[clip::Plane; 5],
+    grid: &SampleGrid,
+    (sw, sh): (u32, u32),
+    poly: &mut Vec<HVert>,
+    tmp: &mut Vec<HVert>,
+    out: &mut Vec<Record>,
+) {
+    let near = -clip_planes[0].c[4];
+    if v.iter().all(|p| p.z < near) {
+        return;
+    }
+    let in_front = v.iter().all(|p| p.z >= near);
+    let guard_ok = |p: &HVert| {
+        let (x, y) = p.screen();
+        x.abs() < GUARD_PX && y.abs() < GUARD_PX
+    };
+    poly.clear();
+    poly.extend_from_slice(v);
+    if !in_front || !v.iter().all(guard_ok) {
+        for (k, plane) in clip_planes.iter().enumerate() {
+            if k > 0 && poly.iter().all(guard_ok) {
+                break;
+            }
+            clip_polygon(poly, plane, tmp);
+            std::mem::swap(poly, tmp);
+            if poly.len() < 3 {
+                return;
+            }
+        }
+    }
+    let screen: Vec<(f64, f64)> = poly.iter().map(HVert::screen).collect();
+    for k in 1..screen.len() - 1 {
+        let Some(st) = SnappedTri::new([screen[0], screen[k], screen[k + 1]]) else {
+            continue;
+        };
+        if cull_back && st.is_back_facing() {
+            continue;
+        }
+        let rows = st.sample_rows(grid, 0..sh);
+        if rows.is_empty() || st.sample_cols(grid, 0..sw).is_empty() {
+            continue;
+        }
+        let vs = st.vertices();
+        #[expect(
+            clippy::cast_possible_truncation,
+            reason = "snapped coordinates are below 2^26"
+        )]
+        out.push(Record {
+            x: vs.map(|q| q.0 as i32),
+            y: vs.map(|q| q.1 as i32),
+            tri,
+            rows: (rows.start, rows.end),
+        });
+    }
+}
+
+/// The planes `λ_i = b_i/w` (2-D homogeneous rasterization, Olano & Greer
+/// 1997) and the depth plane of triangle `tri`, relative to `(ax, ay)`;
+/// `None` when the triangle's plane passes through the eye.
+fn triangle_planes(v: &[HVert; 3], perspective: bool, ax: f64, ay: f64) -> Option<Planes> {
+    // Columns h_i = (X_i·w_i, Y_i·w_i, w_i); λ = M⁻¹·(X, Y, 1).
+    let m = glam::DMat3::from_cols(
+        DVec3::new(v[0].xh, v[0].yh, v[0].w),
+        DVec3::new(v[1].xh, v[1].yh, v[1].w),
+        DVec3::new(v[2].xh, v[2].yh, v[2].w),
+    );
+    let det = m.determinant();
+    let scale = m.x_axis.length() * m.y_axis.length() * m.z_axis.length();
+    if det == 0.0 || !det.is_finite() || det.abs() <= 1e-14 * scale {
+        return None;
+    }
+    let inv = m.inverse();
+    // Row i of M⁻¹ gives λ_i; relative to the anchor: λ_i = r_i0·dx + r_i1·dy + λ_i(anchor).
+    let row = |i: usize| DVec3::new(inv.x_axis[i], inv.y_axis[i], inv.z_axis[i]);
+    let mut lambda = [[0.0; 3]; 3];
+    for (i, l) in lambda.iter_mut().enumerate() {
+        let r = row(i);
+        *l = [r.x, r.y, r.x * ax + r.y * ay + r.z];
+    }
+    // Depth plane: 1/z = Σλ (perspective); z = Σ λ_i z_i (orthographic, Σλ = 1).
+    let weights = if perspective {
+        [1.0; 3]
+    } else {
+        [v[0].z, v[1].z, v[2].z]
+    };
+    let mut depth = [0.0; 3];
+    for (i, l) in lambda.iter().enumerate() {
+        for c in 0..3 {
+            depth[c] += weights[i] * l[c];
+        }
+    }
+    Some(Planes {
+        lambda,
+        depth,
+        ax,
+        ay,
+    })
+}
+
+/// Scans one record over `rows` (a band); returns (depth writes, fragments).
+#[expect(
+    clippy::too_many_arguments,
+    reason = "the band's buffers and the record"
+)]
+fn scan_record(
+    scene: &TriScene,
+    hv: &[HVert],
+    r: &Record,
+    grid: &SampleGrid,
+    rows: std::ops::Range<u32>,
+    sw: u32,
+    perspective: bool,
+    depth_map: &DepthMap,
+    key: &mut [u32],
+    id: &mut [u32],
+    bary: &mut [[f32; 3]],
+) -> (u64, u64) {
+    let Some(st) = SnappedTri::from_snapped([
+        (i64::from(r.x[0]), i64::from(r.y[0])),
+        (i64::from(r.x[1]), i64::from(r.y[1])),
+        (i64::from(r.x[2]), i64::from(r.y[2])),
+    ]) else {
+        return (0, 0);
+    };
+    let idx = scene.tris[r.tri as usize];
+    let v = idx.map(|i| hv[i as usize]);
+    let (ax, ay) = (f64::from(r.x[0]) / 256.0, f64::from(r.y[0]) / 256.0);
+    let Some(pl) = triangle_planes(&v, perspective, ax, ay) else {
+        return (0, 0);
+    };
+    let n = f64::from(grid.n);
+    let dx = 1.0 / n;
+    let row0 = rows.start;
+    let step_l = [
+        pl.lambda[0][0] * dx,
+        pl.lambda[1][0] * dx,
+        pl.lambda[2][0] * dx,
+    ];
+    let step_d = pl.depth[0] * dx;
+    let mut writes = 0u64;
+    let mut frags = 0u64;
+    st.for_each_span(grid, rows, 0..sw, |row, cols| {
+        // Anchor: direct evaluation at the span's first sample.
+        let x0 = (f64::from(cols.start) + 0.5) / n - pl.ax;
+        let y = (f64::from(row) + 0.5) / n - pl.ay;
+        let mut l = [
+            Planes::eval(&pl.lambda[0], x0, y),
+            Planes::eval(&pl.lambda[1], x0, y),
+            Planes::eval(&pl.lambda[2], x0, y),
+        ];
+        let mut d = Planes::eval(&pl.depth, x0, y);
+        let base = ((row - row0) * sw) as usize;
+        for s in cols.clone() {
+            let i = base + s as usize;
+            let k = depth_map.key(d);
+            frags += 1;
+            if k < key[i] || (k == key[i] && r.tri < id[i]) {
+                key[i] = k;
+                id[i] = r.tri;
+                let sum = l[0] + l[1] + l[2];
+                bary[i] = [l[0] / sum, l[1] / sum, l[2] / sum].map(|x| {
+                    #[expect(
+                        clippy::cast_possible_truncation,
+                        reason = "one rounding of the f64 weights"
+                    )]
+                    let f = x as f32;
+                    f
+                });
+                writes += 1;
+            }
+            l[0] += step_l[0];
+            l[1] += step_l[1];
+            l[2] += step_l[2];
+            d += step_d;
+        }
+    });
+    (writes, frags)
+}
+
+fn shade_pass(scene: &TriScene, opts: &RasterOptions, vis: &VisibilityBuffers) -> Frame {
+    let cam = &scene.camera;
+    let (sw, sh) = (cam.sample_width(), cam.sample_height());
+    let ctx = ShadeContext {
+        materials: &scene.materials,
+        lights: &scene.lights,
+        ambient_light: scene.ambient_light,
+        gate_eps: opts.gate_eps,
+        shadows: opts.shadows_needed,
+    };
+    let accel;
+    let rays;
+    let map;
+    let visibility: &dyn Visibility = if !opts.shadows_needed {
+        &Unoccluded
+    } else {
+        match opts.shadows {
+            ShadowMode::Rays => {
+                accel = Accel::new(scene, AccelOptions::default());
+                rays = ShadowRays::new(&accel);
+                &rays
+            }
+            ShadowMode::Map(res) => {
+                map = shadow_map::ShadowMaps::new(scene, res);
+                &map
+            }
+        }
+    };
+    let mut frame = Frame::new(cam.width(), cam.height(), cam.samples(), scene.background);
+    let w = sw as usize;
+    frame
+        .sample_color
+        .par_chunks_mut(w)
+        .zip(frame.depth.par_chunks_mut(w))
+        .zip(frame.id.par_chunks_mut(w))
+        .zip(frame.flags.par_chunks_mut(w))
+        .enumerate()
+        .for_each(|(sy, (((color, depth), ids), flags))| {
+            let sy = u32::try_from(sy).unwrap_or(0);
+            for sx in 0..sw {
+                let i = (sy as usize) * w + sx as usize;
+                let tri = vis.id[i];
+                if tri == BACKGROUND {
+                    continue;
+                }
+                let b = Bary(vis.bary[i]);
+                let sp = scene.surface_at(tri, b);
+                let ray = cam.sample_ray(sx, sy);
+                let shaded = shade::shade(&ctx, &sp, ray.dir, visibility);
+                let v = scene.triangle_f64(tri);
+                let bf = b.0.map(f64::from);
+                let p64 = v[0] * bf[0] + v[1] * bf[1] + v[2] * bf[2];
+                let c = shaded.local;
+                let finite = |x: f32| if x.is_finite() { x } else { 0.0 };
+                color[sx as usize] = Rgb::new(finite(c.r), finite(c.g), finite(c.b));
+                #[expect(clippy::cast_possible_truncation, reason = "frame depth is f32")]
+                {
+                    depth[sx as usize] = cam.frame_depth(p64) as f32;
+                }
+                ids[sx as usize] = tri;
+                flags[sx as usize] = shaded.flags;
+            }
+        });
+    let _ = sh;
+    frame.resolve();
+    frame
+}
