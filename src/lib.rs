@@ -27,7 +27,9 @@
 pub mod accel;
 pub mod camera;
 pub mod color;
+pub mod compare;
 pub mod coverage;
+pub mod diff;
 pub mod frame;
 pub mod image_io;
 pub mod math;
@@ -246,6 +248,12 @@ impl Prepared {
     /// Renders with a backend.
     #[must_use]
     pub fn render(&self, backend: Backend) -> Rendered {
+        self.render_with_depth(backend, self.settings.max_depth)
+    }
+
+    /// Renders with a backend and a given ray-tree depth.
+    #[must_use]
+    pub fn render_with_depth(&self, backend: Backend, max_depth: u32) -> Rendered {
         let start = Instant::now();
         let frame = match backend {
             Backend::Raster => raster::render(&self.tri, &self.raster_options()).0,
@@ -257,11 +265,7 @@ impl Prepared {
                         bvh: self.plan.bvh,
                     },
                 );
-                let max_depth = if self.plan.ray_tree {
-                    self.settings.max_depth
-                } else {
-                    1
-                };
+                let max_depth = if self.plan.ray_tree { max_depth } else { 1 };
                 ray::render(
                     &accel,
                     &ray::RayOptions {

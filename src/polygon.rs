@@ -24,52 +24,158 @@ pub const PLANARITY_TOLERANCE: f64 = 1e-5;
 /// exceeds `UV_AFFINE_TOLERANCE × (uv extent + 1)` are not affine.
 pub const UV_AFFINE_TOLERANCE: f64 = 1e-5;
 
+/// A point of a polygon, by its position in the scene's own lists.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PointRef {
+    /// `None` for the outline, `Some(k)` for hole k.
+    pub hole: Option<usize>,
+    /// Index of the point within its ring (from 0).
+    pub index: usize,
+}
+
+impl std::fmt::Display for PointRef {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.hole {
+            None => write!(f, "point {} of the outline", self.index),
+            Some(h) => write!(f, "point {} of hole {h}", self.index),
+        }
+    }
+}
+
+/// An edge of a polygon ring, by the indices of its two end points.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct EdgeRef {
+    /// `None` for the outline, `Some(k)` for hole k.
+    pub hole: Option<usize>,
+    /// Index of the first end point within its ring.
+    pub from: usize,
+    /// Index of the second end point within its ring.
+    pub to: usize,
+}
+
+impl EdgeRef {
+    /// The edge's first end point.
+    #[must_use]
+    pub fn start(&self) -> PointRef {
+        PointRef {
+            hole: self.hole,
+            index: self.from,
+        }
+    }
+}
+
+impl std::fmt::Display for EdgeRef {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.hole {
+            None => write!(
+                f,
+                "the outline's edge from point {} to point {}",
+                self.from, self.to
+            ),
+            Some(h) => write!(
+                f,
+                "the edge of hole {h} from point {} to point {}",
+                self.from, self.to
+            ),
+        }
+    }
+}
+
+/// A length for a message, to 4 significant digits.
+fn short(x: f64) -> String {
+    let r: f64 = format!("{x:.3e}").parse().unwrap_or(x);
+    if r == 0.0 || (1e-4..1e16).contains(&r.abs()) {
+        format!("{r}")
+    } else {
+        format!("{r:e}")
+    }
+}
+
+/// "the outline" or "hole k".
+fn ring_name(hole: Option<usize>) -> String {
+    hole.map_or_else(|| "the outline".to_string(), |h| format!("hole {h}"))
+}
+
 /// Why a polygon was rejected.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[non_exhaustive]
 pub enum PolygonError {
     /// A coordinate is NaN or infinite.
-    #[error("point {index} is not finite")]
+    #[error("{point} is not finite")]
     NotFinite {
-        /// Index in the flat list (outline, then holes).
-        index: usize,
+        /// The point.
+        point: PointRef,
     },
     /// A ring has fewer than three distinct points.
-    #[error("{ring} has fewer than 3 distinct points")]
+    #[error(
+        "{} has {distinct} distinct point{}; at least 3 are needed",
+        ring_name(*.hole),
+        if *.distinct == 1 { "" } else { "s" }
+    )]
     TooFewPoints {
-        /// "the outline" or "hole k".
-        ring: String,
+        /// `None` for the outline, `Some(k)` for hole k.
+        hole: Option<usize>,
+        /// Its number of distinct points.
+        distinct: usize,
+    },
+    /// A ring runs out to a point and straight back: a part with no area.
+    #[error(
+        "{} runs from point {from} to point {to} and straight back along the same edge (a spike with no area)",
+        ring_name(*.hole)
+    )]
+    Spike {
+        /// `None` for the outline, `Some(k)` for hole k.
+        hole: Option<usize>,
+        /// Where the spike starts.
+        from: usize,
+        /// Its tip.
+        to: usize,
     },
     /// All points of the outline lie on one line.
-    #[error("the outline's points are all collinear")]
+    #[error("the outline's points all lie on one line; a polygon needs an area")]
     Collinear,
     /// A point is too far from the plane.
     #[error(
-        "not planar: point {index} is {distance:.3e} from the Newell plane, more than {tolerance:.0e} × the diameter ({limit:.3e})"
+        "not planar: {point} is {} from the polygon's plane (its Newell plane through the outline's centroid), more than the tolerance {tolerance:.0e} × the polygon's diameter {} = {}",
+        short(*.distance),
+        short(*.diameter),
+        short(*.limit)
     )]
     NotPlanar {
-        /// Index in the flat list.
-        index: usize,
+        /// The point farthest from the plane.
+        point: PointRef,
         /// Its distance from the plane.
         distance: f64,
         /// The relative tolerance.
         tolerance: f64,
+        /// The polygon's diameter (of its bounding box).
+        diameter: f64,
         /// The absolute limit.
         limit: f64,
     },
     /// Two edges cross or touch.
-    #[error("the edges {a} and {b} cross or touch (rings must be simple and disjoint)")]
+    #[error(
+        "{a} and {b} cross, touch or overlap; the outline and the holes must be simple rings that do not touch each other"
+    )]
     SelfIntersecting {
-        /// "outline edge 3" or similar.
-        a: String,
-        /// The other edge.
-        b: String,
+        /// One edge.
+        a: EdgeRef,
+        /// The other edge (the later one in the lists).
+        b: EdgeRef,
     },
-    /// A hole lies outside the outline or inside another hole.
-    #[error("hole {hole} is not inside the outline (or lies inside another hole)")]
+    /// A hole lies outside the outline.
+    #[error("hole {hole} lies outside the outline; a hole must lie inside it")]
     HoleOutside {
         /// Hole index.
         hole: usize,
+    },
+    /// A hole lies inside another hole.
+    #[error("hole {hole} lies inside hole {other}; holes must not overlap")]
+    HoleInHole {
+        /// Hole index.
+        hole: usize,
+        /// The hole it lies in.
+        other: usize,
     },
     /// The triangulator refused the input.
     #[error("the triangulation failed: {0}")]
@@ -234,8 +340,30 @@ pub fn triangulate(
         .chain(holes.iter().flatten())
         .copied()
         .collect();
+    // Flat index (outline, then holes) → the point in its own ring.
+    let ring_sizes: Vec<usize> = std::iter::once(outline.len())
+        .chain(holes.iter().map(Vec::len))
+        .collect();
+    let point_ref = |flat: usize| -> PointRef {
+        let mut k = flat;
+        for (r, &n) in ring_sizes.iter().enumerate() {
+            if k < n {
+                return PointRef {
+                    hole: r.checked_sub(1),
+                    index: k,
+                };
+            }
+            k -= n;
+        }
+        PointRef {
+            hole: None,
+            index: flat,
+        }
+    };
     if let Some(index) = all.iter().position(|p| !p.is_finite()) {
-        return Err(PolygonError::NotFinite { index });
+        return Err(PolygonError::NotFinite {
+            point: point_ref(index),
+        });
     }
     let n = newell_normal(outline);
     let diameter = {
@@ -254,13 +382,15 @@ pub fn triangulate(
     };
     if distinct(outline) < 3 {
         return Err(PolygonError::TooFewPoints {
-            ring: "the outline".into(),
+            hole: None,
+            distinct: distinct(outline),
         });
     }
     for (k, h) in holes.iter().enumerate() {
         if distinct(h) < 3 {
             return Err(PolygonError::TooFewPoints {
-                ring: format!("hole {k}"),
+                hole: Some(k),
+                distinct: distinct(h),
             });
         }
     }
@@ -279,16 +409,22 @@ pub fn triangulate(
     let centroid = outline.iter().copied().sum::<DVec3>() / outline.len() as f64;
     if opts.check_planarity {
         let limit = PLANARITY_TOLERANCE * diameter;
+        // Report the point farthest from the plane (the first of equals).
+        let mut worst = (0usize, 0.0f64);
         for (index, p) in all.iter().enumerate() {
             let distance = (*p - centroid).dot(normal).abs();
-            if distance > limit {
-                return Err(PolygonError::NotPlanar {
-                    index,
-                    distance,
-                    tolerance: PLANARITY_TOLERANCE,
-                    limit,
-                });
+            if distance > worst.1 {
+                worst = (index, distance);
             }
+        }
+        if worst.1 > limit {
+            return Err(PolygonError::NotPlanar {
+                point: point_ref(worst.0),
+                distance: worst.1,
+                tolerance: PLANARITY_TOLERANCE,
+                diameter,
+                limit,
+            });
         }
     }
     // A right-handed basis (t, b, normal): counter-clockwise in (t, b) is
@@ -317,20 +453,20 @@ pub fn triangulate(
     let outline_rings = clean_ring(&to_ring(outline));
     let hole_rings: Vec<Vec<Vec<V2>>> = holes.iter().map(|h| clean_ring(&to_ring(h))).collect();
 
-    // Every ring (after splitting) must still enclose an area.
-    let name_of = |ring_id: usize| -> String {
+    // Every ring (after splitting) must still enclose an area: a part
+    // of two points is a spike, out and straight back.
+    let hole_of = |ring_id: usize| -> Option<usize> {
         if ring_id < outline_rings.len() {
-            "the outline".to_string()
-        } else {
-            let mut k = ring_id - outline_rings.len();
-            for (h, parts) in hole_rings.iter().enumerate() {
-                if k < parts.len() {
-                    return format!("hole {h}");
-                }
-                k -= parts.len();
-            }
-            "a ring".to_string()
+            return None;
         }
+        let mut k = ring_id - outline_rings.len();
+        for (h, parts) in hole_rings.iter().enumerate() {
+            if k < parts.len() {
+                return Some(h);
+            }
+            k -= parts.len();
+        }
+        None
     };
     let rings: Vec<&Vec<V2>> = outline_rings
         .iter()
@@ -338,7 +474,13 @@ pub fn triangulate(
         .collect();
     for (id, r) in rings.iter().enumerate() {
         if r.len() < 3 {
-            return Err(PolygonError::TooFewPoints { ring: name_of(id) });
+            let from = r.first().map_or(0, |v| point_ref(v.index).index);
+            let to = r.get(1).map_or(from, |v| point_ref(v.index).index);
+            return Err(PolygonError::Spike {
+                hole: hole_of(id),
+                from,
+                to,
+            });
         }
     }
 
@@ -346,6 +488,8 @@ pub fn triangulate(
     struct Edge {
         ring: usize,
         k: usize,
+        from: usize,
+        to: usize,
         a: Point2<f64>,
         b: Point2<f64>,
         xmin: f64,
@@ -359,6 +503,8 @@ pub fn triangulate(
             edges.push(Edge {
                 ring,
                 k,
+                from: r[k].index,
+                to: r[(k + 1) % r.len()].index,
                 a,
                 b,
                 xmin: a.x.min(b.x),
@@ -415,11 +561,17 @@ pub fn triangulate(
             }
             // Any other touch (non-adjacent edges of one ring, a hole and
             // another ring) breaks "simple and disjoint".
-            let describe = |x: &Edge| format!("{} edge {}", name_of(x.ring), x.k);
-            return Err(PolygonError::SelfIntersecting {
-                a: describe(e),
-                b: describe(f),
-            });
+            let edge_ref = |x: &Edge| EdgeRef {
+                hole: hole_of(x.ring),
+                from: point_ref(x.from).index,
+                to: point_ref(x.to).index,
+            };
+            let (mut a, mut b) = (edge_ref(e), edge_ref(f));
+            let order = |x: &EdgeRef| (x.hole.map_or(0, |h| h + 1), x.from);
+            if order(&b) < order(&a) {
+                std::mem::swap(&mut a, &mut b);
+            }
+            return Err(PolygonError::SelfIntersecting { a, b });
         }
     }
 
@@ -433,14 +585,13 @@ pub fn triangulate(
                     in_outline = !in_outline;
                 }
             }
-            let mut in_other_hole = false;
+            if !in_outline {
+                return Err(PolygonError::HoleOutside { hole: h });
+            }
             for (g, other) in hole_rings.iter().enumerate() {
                 if g != h && other.iter().any(|r| inside_ring(r, p) == Some(true)) {
-                    in_other_hole = true;
+                    return Err(PolygonError::HoleInHole { hole: h, other: g });
                 }
-            }
-            if !in_outline || in_other_hole {
-                return Err(PolygonError::HoleOutside { hole: h });
             }
         }
     }

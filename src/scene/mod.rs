@@ -19,13 +19,13 @@ use std::sync::Arc;
 pub use error::{LoadError, Loc};
 pub use obj::{MeshData, MeshTri};
 
-use reader::{At, Source, Table};
+use reader::{At, Source, Table, num};
 use toml::de::{DeTable, DeValue};
 
 use crate::color::Rgb;
 use crate::math::{DVec3, Transform, TransformStep, Vec3, to_f32};
 use crate::options::{BvhMode, DepthFormat, Geometry, ShadowMode};
-use crate::polygon::{self, PolygonOptions};
+use crate::polygon::{self, PointRef, PolygonError, PolygonOptions};
 use crate::shade::{Bump, BumpMethod, Light, LightKind, Material, Pigment};
 use crate::texture::Texture;
 
@@ -273,13 +273,24 @@ impl Scene {
             path: path.to_path_buf(),
             source,
         })?;
-        let text = String::from_utf8(bytes).map_err(|e| LoadError::Scene {
-            path: path.to_path_buf(),
-            message: format!(
-                "not valid UTF-8 (byte {}); a scene file is TOML text",
-                e.utf8_error().valid_up_to()
-            ),
-        })?;
+        let text = match String::from_utf8(bytes) {
+            Ok(text) => text,
+            Err(e) => {
+                // Locate the first bad byte in the valid text before it.
+                let bytes = e.as_bytes();
+                let at = e.utf8_error().valid_up_to();
+                let valid = std::str::from_utf8(&bytes[..at]).unwrap_or_default();
+                let src = Source { path, text: valid };
+                return Err(LoadError::Syntax {
+                    path: path.to_path_buf(),
+                    loc: src.loc(at),
+                    message: format!(
+                        "the file is not valid UTF-8 (byte 0x{:02X} at offset {at}); a TOML file must be UTF-8 text",
+                        bytes[at]
+                    ),
+                });
+            }
+        };
         Scene::from_str(path, &text)
     }
 
@@ -291,10 +302,19 @@ impl Scene {
     /// [`LoadError`] naming the place and what was expected.
     pub fn from_str(path: &Path, text: &str) -> Result<Scene, LoadError> {
         let src = Source { path, text };
-        let doc = DeTable::parse(text).map_err(|e| LoadError::Syntax {
-            path: path.to_path_buf(),
-            loc: src.loc(e.span().map_or(0, |s| s.start)),
-            message: e.message().trim().to_string(),
+        let doc = DeTable::parse(text).map_err(|e| {
+            let mut message = e.message().trim().to_string();
+            // toml names neither the key nor the table; the span is the key.
+            if message == "duplicate key"
+                && let Some(key) = e.span().and_then(|s| text.get(s)).filter(|k| !k.is_empty())
+            {
+                message = format!("duplicate key `{key}`: it is already defined in this table");
+            }
+            LoadError::Syntax {
+                path: path.to_path_buf(),
+                loc: src.loc(e.span().map_or(0, |s| s.start)),
+                message,
+            }
         })?;
         let span = doc.span();
         let root = Table::new(&src, String::new(), doc.get_ref(), span);
@@ -394,10 +414,14 @@ impl Loader {
         let ray = self.ray(root)?;
         let tolerance = self.tolerance(root)?;
         root.finish()?;
+        // Checked after the unknown keys, so that a misspelt `[[object]]`
+        // is reported as such. The place is the empty `objects = []`, or
+        // the top level, where every missing table is reported.
         if objects.is_empty() {
-            return Err(LoadError::Scene {
-                path,
-                message: "the scene has no objects; add at least one [[objects]] entry".into(),
+            let message = "the scene has no objects; add at least one [[objects]] entry";
+            return Err(match root.span_of("objects") {
+                Some(span) => root.err(&span, "objects", message),
+                None => root.err_here("objects", message),
             });
         }
         Ok(Scene {
@@ -498,7 +522,7 @@ impl Loader {
                 return Err(t.err(
                     &fov.span,
                     "fov_y",
-                    format!("expected 0 < fov_y < 180 (degrees), got {}", fov.value),
+                    format!("expected 0 < fov_y < 180 (degrees), got {}", num(fov.value)),
                 ));
             }
             ProjectionDesc::Perspective {
@@ -513,22 +537,25 @@ impl Loader {
                 return Err(t.err(
                     &vh.span,
                     "view_height",
-                    format!("expected > 0, got {}", vh.value),
+                    format!("expected > 0, got {}", num(vh.value)),
                 ));
             }
             ProjectionDesc::Orthographic {
                 view_height: vh.value,
             }
         };
-        let f = look_at.value - eye.value;
-        if f.length() == 0.0 {
+        let Some(f) = (look_at.value - eye.value).try_normalize() else {
+            let why = if look_at.value == eye.value {
+                "look_at equals eye"
+            } else {
+                "look_at is too close to eye"
+            };
             return Err(t.err(
                 &look_at.span,
                 "look_at",
-                "look_at equals eye; the view direction is undefined",
+                format!("{why}; the view direction is undefined"),
             ));
-        }
-        let f = f.normalize();
+        };
         if up.value.length() == 0.0 || f.cross(up.value).length() <= 1e-9 * up.value.length() {
             return Err(t.err(
                 &up.span,
@@ -536,10 +563,19 @@ impl Loader {
                 "up is zero or parallel to the view direction (look_at − eye)",
             ));
         }
+        // near is a distance in the scene: bounded like coordinates, so
+        // the default far (at least 2·near) stays finite.
         let near = match t.f64("near")? {
-            Some(n) if n.value > 0.0 => n.value,
+            Some(n) if n.value > 0.0 && n.value <= MAX_COORDINATE => n.value,
             Some(n) => {
-                return Err(t.err(&n.span, "near", format!("expected > 0, got {}", n.value)));
+                return Err(t.err(
+                    &n.span,
+                    "near",
+                    format!(
+                        "expected 0 < near ≤ {MAX_COORDINATE:e}, got {}",
+                        num(n.value)
+                    ),
+                ));
             }
             None => 0.01,
         };
@@ -549,7 +585,7 @@ impl Loader {
                 return Err(t.err(
                     &f.span,
                     "far",
-                    format!("expected far > near ({near}), got {}", f.value),
+                    format!("expected far > near ({}), got {}", num(near), num(f.value)),
                 ));
             }
             None => None,
@@ -595,7 +631,7 @@ impl Loader {
                 return Err(t.err(
                     &v.span,
                     "tessellation_error",
-                    format!("expected > 0 (pixels), got {}", v.value),
+                    format!("expected > 0 (pixels), got {}", num(v.value)),
                 ));
             }
             r.tessellation_error = v.value;
@@ -645,7 +681,7 @@ impl Loader {
                             } else {
                                 "fade_power"
                             },
-                            "fade is only for point lights",
+                            "fade_distance and fade_power are only for point lights; this light is parallel",
                         ));
                     }
                     LightKind::Parallel {
@@ -668,7 +704,7 @@ impl Loader {
                             return Err(t.err(
                                 &v.span,
                                 key,
-                                format!("expected > 0, got {}", v.value),
+                                format!("expected > 0, got {}", num(v.value)),
                             ));
                         }
                     }
@@ -681,15 +717,15 @@ impl Loader {
                 (Some(v), None) => {
                     return Err(t.err(
                         &v.span,
-                        "fade_power",
-                        "fade_distance and fade_power go together: give both or neither",
+                        "fade_distance",
+                        "fade_distance is given without fade_power; give both or neither",
                     ));
                 }
                 (None, Some(v)) => {
                     return Err(t.err(
                         &v.span,
-                        "fade_distance",
-                        "fade_distance and fade_power go together: give both or neither",
+                        "fade_power",
+                        "fade_power is given without fade_distance; give both or neither",
                     ));
                 }
             };
@@ -766,7 +802,11 @@ impl Loader {
             let mut set = |key: &'static str, slot: &mut f32| -> Result<(), LoadError> {
                 if let Some(v) = t.f64(key)? {
                     if v.value < 0.0 {
-                        return Err(t.err(&v.span, key, format!("expected ≥ 0, got {}", v.value)));
+                        return Err(t.err(
+                            &v.span,
+                            key,
+                            format!("expected ≥ 0, got {}", num(v.value)),
+                        ));
                     }
                     if v.value > f64::from(f32::MAX) {
                         return Err(t.err(&v.span, key, "exceeds the f32 range"));
@@ -778,7 +818,7 @@ impl Loader {
                     {
                         *slot = v.value as f32;
                     }
-                    spans.insert(key, v.span);
+                    spans.insert(key, (v.span, v.value));
                 }
                 Ok(())
             };
@@ -796,16 +836,24 @@ impl Loader {
             set("ior", &mut m.ior)?;
             set("emission", &mut m.emission)?;
         }
-        let here = |key: &str| spans.get(key).cloned().unwrap_or_default();
+        let here = |key: &str| spans.get(key).map(|s| s.0.clone()).unwrap_or_default();
+        let written = |key: &str, default: f32| spans.get(key).map_or(f64::from(default), |s| s.1);
         if m.roughness <= 0.0 {
             return Err(t.err(
                 &here("roughness"),
                 "roughness",
-                "expected > 0 (the specular exponent is 1/roughness)",
+                format!(
+                    "expected > 0 (the specular exponent is 1/roughness), got {}",
+                    num(written("roughness", m.roughness))
+                ),
             ));
         }
         if m.ior <= 0.0 {
-            return Err(t.err(&here("ior"), "ior", "expected > 0"));
+            return Err(t.err(
+                &here("ior"),
+                "ior",
+                format!("expected > 0, got {}", num(written("ior", m.ior))),
+            ));
         }
         if m.filter + m.transmit > 1.0 {
             let key = if spans.contains_key("transmit") {
@@ -817,8 +865,9 @@ impl Loader {
                 &here(key),
                 key,
                 format!(
-                    "filter + transmit must be ≤ 1, got {}",
-                    m.filter + m.transmit
+                    "expected filter + transmit ≤ 1, got {} + {}",
+                    num(written("filter", m.filter)),
+                    num(written("transmit", m.transmit))
                 ),
             ));
         }
@@ -1000,7 +1049,10 @@ impl Loader {
                     return Err(t.err(
                         &r.span,
                         "radius",
-                        format!("expected 0 < radius ≤ {MAX_COORDINATE:e}, got {}", r.value),
+                        format!(
+                            "expected 0 < radius ≤ {MAX_COORDINATE:e}, got {}",
+                            num(r.value)
+                        ),
                     ));
                 }
                 Shape::Sphere {
@@ -1013,11 +1065,16 @@ impl Loader {
                 let hi = t.req_vec3("max")?;
                 check_coord(t, "min", &lo)?;
                 check_coord(t, "max", &hi)?;
-                if !lo.value.cmplt(hi.value).all() {
+                if let Some(axis) = (0..3).find(|&k| lo.value[k] >= hi.value[k]) {
                     return Err(t.err(
                         &hi.span,
                         "max",
-                        "expected min < max on every axis (a box needs a positive size)",
+                        format!(
+                            "expected min < max on every axis (a box needs a positive size), but on {} min = {} and max = {}",
+                            ["x", "y", "z"][axis],
+                            num(lo.value[axis]),
+                            num(hi.value[axis])
+                        ),
                     ));
                 }
                 Shape::Box {
@@ -1035,7 +1092,7 @@ impl Loader {
                     return Err(t.err(
                         &ex.span,
                         "exponents",
-                        format!("expected 0 < e, n ≤ 4, got [{e}, {n}]"),
+                        format!("expected 0 < e, n ≤ 4, got [{}, {}]", num(e), num(n)),
                     ));
                 }
                 Shape::Superellipsoid { e, n }
@@ -1103,7 +1160,7 @@ impl Loader {
         if refracts && matches!(shape, Shape::Polygon(_)) {
             return Err(t.err(&mat_name.span, "material", format!("material \"{}\" refracts (ior ≠ 1 with filter/transmit) but a polygon is not closed; refraction needs an inside", mat.name)));
         }
-        let loc = t.loc(&t.span_of("kind").unwrap_or_default());
+        let loc = t.start();
         #[expect(
             clippy::cast_possible_truncation,
             reason = "material count is checked ≤ u16::MAX"
@@ -1121,61 +1178,99 @@ impl Loader {
         })
     }
 
+    /// The points of a ring, with the span of each.
     fn points(
         &self,
         t: &Table<'_, '_>,
-        key: &'static str,
+        key: &str,
         v: &toml::Spanned<DeValue<'_>>,
-    ) -> Result<Vec<DVec3>, LoadError> {
+    ) -> Result<(Vec<DVec3>, Vec<reader::Span>), LoadError> {
         let DeValue::Array(items) = v.get_ref() else {
             return Err(t.err(&v.span(), key, "expected an array of [x, y, z] points"));
         };
         let mut out = Vec::with_capacity(items.len());
-        for item in items.iter() {
-            let p = reader::floats_of::<3>(item).map_err(|m| t.err(&item.span(), key, m))?;
+        let mut spans = Vec::with_capacity(items.len());
+        for (k, item) in items.iter().enumerate() {
+            let here = format!("{key}[{k}]");
+            let p = reader::floats_of::<3>(item).map_err(|m| t.err(&item.span(), &here, m))?;
             let p = DVec3::from_array(p);
             if p.abs().max_element() > MAX_COORDINATE {
                 return Err(t.err(
                     &item.span(),
-                    key,
+                    &here,
                     format!("coordinates must be within ±{MAX_COORDINATE:e}"),
                 ));
             }
             out.push(p);
+            spans.push(item.span());
         }
-        Ok(out)
+        Ok((out, spans))
     }
 
     fn polygon(&mut self, t: &Table<'_, '_>) -> Result<Shape, LoadError> {
         let (pts_arr, pts_span) = t.array("points")?.ok_or_else(|| t.missing("points"))?;
         let pts_value = toml::Spanned::new(pts_span.clone(), DeValue::Array(pts_arr.clone()));
-        let outline = self.points(t, "points", &pts_value)?;
+        let (outline, outline_spans) = self.points(t, "points", &pts_value)?;
         let mut holes = Vec::new();
+        // Per hole: the span of the hole and of each of its points.
+        let mut hole_spans = Vec::new();
         if let Some((harr, _)) = t.array("holes")? {
-            for h in harr.iter() {
-                holes.push(self.points(t, "holes", h)?);
+            for (k, h) in harr.iter().enumerate() {
+                let (pts, spans) = self.points(t, &format!("holes[{k}]"), h)?;
+                holes.push(pts);
+                hole_spans.push((h.span(), spans));
             }
         }
         let uv = match t.array("uv")? {
             None => None,
             Some((uarr, _)) => {
                 let mut uv = Vec::new();
-                for item in uarr.iter() {
+                for (k, item) in uarr.iter().enumerate() {
                     uv.push(
-                        reader::floats_of::<2>(item).map_err(|m| t.err(&item.span(), "uv", m))?,
+                        reader::floats_of::<2>(item)
+                            .map_err(|m| t.err(&item.span(), &format!("uv[{k}]"), m))?,
                     );
                 }
                 Some(uv)
             }
         };
-        let tri = polygon::triangulate(
-            &outline,
-            &holes,
-            PolygonOptions {
-                check_planarity: true,
-            },
-        )
-        .map_err(|e| t.err(&pts_span, "points", format!("invalid polygon: {e}")))?;
+        let tri =
+            polygon::triangulate(
+                &outline,
+                &holes,
+                PolygonOptions {
+                    check_planarity: true,
+                },
+            )
+            .map_err(|e| {
+                // Point at the ring or the point the problem is about.
+                let ring = |hole: Option<usize>| match hole {
+                    None => ("points".to_string(), pts_span.clone()),
+                    Some(h) => (format!("holes[{h}]"), hole_spans[h].0.clone()),
+                };
+                let point = |p: PointRef| match p.hole {
+                    None => (
+                        format!("points[{}]", p.index),
+                        outline_spans[p.index].clone(),
+                    ),
+                    Some(h) => (
+                        format!("holes[{h}][{}]", p.index),
+                        hole_spans[h].1[p.index].clone(),
+                    ),
+                };
+                let (key, span) =
+                    match &e {
+                        PolygonError::NotFinite { point: p }
+                        | PolygonError::NotPlanar { point: p, .. } => point(*p),
+                        PolygonError::SelfIntersecting { b, .. } => point(b.start()),
+                        PolygonError::TooFewPoints { hole, .. }
+                        | PolygonError::Spike { hole, .. } => ring(*hole),
+                        PolygonError::HoleOutside { hole }
+                        | PolygonError::HoleInHole { hole, .. } => ring(Some(*hole)),
+                        _ => ring(None),
+                    };
+                t.err(&span, &key, format!("invalid polygon: {e}"))
+            })?;
         let mut points = outline.clone();
         let mut ring_sizes = vec![outline.len()];
         for h in &holes {
@@ -1250,7 +1345,7 @@ impl Loader {
                     loc: t.loc(&v.span),
                 }),
                 Some(v) => {
-                    return Err(t.err(&v.span, key, format!("expected ≥ 0, got {}", v.value)));
+                    return Err(t.err(&v.span, key, format!("expected ≥ 0, got {}", num(v.value))));
                 }
                 None => None,
             })

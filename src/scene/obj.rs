@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 
 use super::error::LoadError;
 use crate::math::{DVec3, Vec2, Vec3};
-use crate::polygon::{self, PolygonOptions};
+use crate::polygon::{self, PolygonError, PolygonOptions};
 
 /// One triangle of a mesh: indices into the mesh's positions, normals and uvs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -76,9 +76,30 @@ fn mesh_err(path: &Path, line: usize, message: impl Into<String>) -> LoadError {
     }
 }
 
-fn parse_f32(tok: &str) -> Option<f32> {
-    let v: f32 = tok.parse().ok()?;
-    v.is_finite().then_some(v)
+/// A number of the file, or what is wrong with it.
+fn parse_f32(tok: &str) -> Result<f32, String> {
+    match (tok.parse::<f32>(), tok.parse::<f64>()) {
+        (Ok(v), _) if v.is_finite() => Ok(v),
+        (_, Ok(v)) if v.is_finite() => Err(format!(
+            "`{tok}` is outside the f32 range (a magnitude above {:e})",
+            f32::MAX
+        )),
+        (Ok(_), _) | (_, Ok(_)) => Err(format!("`{tok}` is not a finite number")),
+        _ => Err(format!("`{}` is not a number", shown(tok))),
+    }
+}
+
+/// A token as shown in a message: control characters escaped.
+fn shown(tok: &str) -> String {
+    tok.chars()
+        .map(|c| {
+            if c.is_control() {
+                c.escape_debug().to_string()
+            } else {
+                c.to_string()
+            }
+        })
+        .collect()
 }
 
 /// The check pass: every line well formed, every number finite in `f32`,
@@ -109,13 +130,7 @@ fn check(path: &Path, text: &str) -> Result<Vec<FaceInfo>, LoadError> {
                 ));
             }
             for a in &args {
-                if parse_f32(a).is_none() {
-                    return Err(mesh_err(
-                        path,
-                        line,
-                        format!("`{a}` is not a finite number in f32 range"),
-                    ));
-                }
+                parse_f32(a).map_err(|m| mesh_err(path, line, m))?;
             }
             Ok(())
         };
@@ -192,11 +207,17 @@ fn check(path: &Path, text: &str) -> Result<Vec<FaceInfo>, LoadError> {
             }
             "o" | "g" | "s" | "usemtl" | "mtllib" | "l" | "p" => {}
             other => {
+                let hint = if other.contains('\u{FFFD}') || other.chars().any(char::is_control) {
+                    " (the line is not text: is this an OBJ file?)"
+                } else {
+                    ""
+                };
                 return Err(mesh_err(
                     path,
                     line,
                     format!(
-                        "unsupported OBJ statement `{other}`; expected v, vt, vn, f, o, g, s, usemtl, mtllib, l or p"
+                        "unsupported OBJ statement `{}`; expected v, vt, vn, f, o, g, s, usemtl, mtllib, l or p{hint}",
+                        shown(other)
                     ),
                 ));
             }
@@ -210,6 +231,38 @@ fn check(path: &Path, text: &str) -> Result<Vec<FaceInfo>, LoadError> {
         });
     }
     Ok(faces)
+}
+
+/// A polygon error of a face with more than three corners, in the face's
+/// own terms: its corners as written on the line.
+fn face_error(e: &PolygonError, corners: &[&str]) -> String {
+    let c = |i: usize| {
+        corners
+            .get(i)
+            .map_or_else(|| format!("#{i}"), |s| format!("`{}`", shown(s)))
+    };
+    let n = corners.len();
+    match e {
+        PolygonError::SelfIntersecting { a, b } => format!(
+            "the face's edges {}–{} and {}–{} cross, touch or overlap; a face must be a simple polygon",
+            c(a.from),
+            c(a.to),
+            c(b.from),
+            c(b.to)
+        ),
+        PolygonError::Spike { from, to, .. } => format!(
+            "the face runs from corner {} to corner {} and straight back (a spike with no area)",
+            c(*from),
+            c(*to)
+        ),
+        PolygonError::TooFewPoints { distinct, .. } => format!(
+            "the face's {n} corners have only {distinct} distinct positions; a face needs at least 3"
+        ),
+        PolygonError::Collinear => {
+            format!("the face's {n} corners all lie on one line; a face needs an area")
+        }
+        other => format!("face with {n} corners: {other}"),
+    }
 }
 
 /// Loads an OBJ file from its bytes (decoded lossily if not UTF-8).
@@ -325,7 +378,13 @@ pub fn load_obj_bytes(path: &Path, bytes: &[u8]) -> Result<MeshData, LoadError> 
                     },
                 )
                 .map_err(|e| {
-                    mesh_err(path, info.line, format!("face with {arity} corners: {e}"))
+                    let corners: Vec<&str> = text
+                        .lines()
+                        .nth(info.line - 1)
+                        .and_then(|l| l.split('#').next())
+                        .map(|l| l.split_whitespace().skip(1).collect())
+                        .unwrap_or_default();
+                    mesh_err(path, info.line, face_error(&e, &corners))
                 })?;
                 // The CDT triangles wind around the face's Newell normal,
                 // which follows the face's own winding.

@@ -86,6 +86,11 @@ impl<'s, 'i> Table<'s, 'i> {
         self.src.loc(span.start)
     }
 
+    /// Where this table starts (its `[header]`, or its inline `{`).
+    pub fn start(&self) -> Loc {
+        self.loc(&self.span)
+    }
+
     pub fn path(&self) -> &Path {
         self.src.path
     }
@@ -128,17 +133,24 @@ impl<'s, 'i> Table<'s, 'i> {
     }
 
     pub fn missing(&self, key: &str) -> LoadError {
+        if self.name.is_empty() {
+            // Every top-level key is a table.
+            return self.err_here(key, format!("missing required table [{key}]"));
+        }
         self.err_here(
             key,
-            format!("missing required key `{key}` in [{}]", self.display_name()),
+            format!("missing required key `{key}` {}", self.display_name()),
         )
     }
 
+    /// "in [image]", "in objects[2]" or "at the top level".
     fn display_name(&self) -> String {
         if self.name.is_empty() {
-            "the top level".to_string()
+            "at the top level".to_string()
+        } else if self.name.ends_with(']') {
+            format!("in {}", self.name)
         } else {
-            self.name.clone()
+            format!("in [{}]", self.name)
         }
     }
 
@@ -160,7 +172,7 @@ impl<'s, 'i> Table<'s, 'i> {
                     &k.span(),
                     name,
                     format!(
-                        "unknown key in [{}]; expected one of: {list}",
+                        "unknown key {}; expected one of: {list}",
                         self.display_name()
                     ),
                 ));
@@ -329,6 +341,17 @@ impl<'s, 'i> Table<'s, 'i> {
         ),
     > {
         self.table.iter()
+    }
+}
+
+/// A number for a message: Rust's shortest round-trip form, in exponent
+/// form when very large or very small (so 1e300 is not 301 digits).
+pub(crate) fn num(x: f64) -> String {
+    let a = x.abs();
+    if a == 0.0 || !a.is_finite() || (1e-4..1e16).contains(&a) {
+        format!("{x}")
+    } else {
+        format!("{x:e}")
     }
 }
 

@@ -22,8 +22,35 @@ pub struct Cli {
 pub enum Command {
     /// Render a scene to a PNG.
     Render(RenderArgs),
+    /// Render scenes two ways (or against an image) and explain every difference.
+    ///
+    /// Exit status 0 when every scene is within tolerance, 1 when one is not.
+    Diff(DiffArgs),
     /// Print what a scene contains and what the render plan decides.
     Plan(PlanArgs),
+}
+
+/// `rendiff diff`.
+#[derive(Debug, Args)]
+pub struct DiffArgs {
+    /// The scene files (.toml).
+    #[arg(required = true)]
+    pub scenes: Vec<PathBuf>,
+    /// Side a: a backend (raster, ray).
+    #[arg(long = "a", default_value = "raster", value_name = "BACKEND")]
+    pub a: String,
+    /// Side b: a backend, or PATH.png (any argument with '.' or '/').
+    #[arg(long = "b", default_value = "ray", value_name = "BACKEND|PATH.png")]
+    pub b: String,
+    /// Print the JSON verdict (one object per scene; an array for several).
+    #[arg(long)]
+    pub json: bool,
+    /// Write both images, the maps, a composite, report.json and index.html into DIR.
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+    /// Render settings.
+    #[command(flatten)]
+    pub flags: RenderFlags,
 }
 
 /// Flags shared by every command that renders.

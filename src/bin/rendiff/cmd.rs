@@ -10,14 +10,76 @@ use rendiff::shade::{LightKind, Pigment};
 use rendiff::{Backend, Overrides, Prepared};
 
 use crate::Outcome;
-use crate::args::{Cli, Command, PlanArgs, RenderArgs, RenderFlags};
+use crate::args::{Cli, Command, DiffArgs, PlanArgs, RenderArgs, RenderFlags};
 
 /// Runs a parsed command line.
 pub fn run(cli: Cli) -> Result<Outcome> {
     match cli.command {
         Command::Render(a) => with_threads(a.flags.threads, || render(&a)),
+        Command::Diff(a) => with_threads(a.flags.threads, || diff(&a)),
         Command::Plan(a) => plan(&a),
     }
+}
+
+fn diff(a: &DiffArgs) -> Result<Outcome> {
+    use rendiff::compare::report::index_html;
+    use rendiff::diff::{self, Side};
+    let side_a = Side::parse(&a.a).map_err(|e| anyhow::anyhow!("--a: {e}"))?;
+    let side_b = Side::parse(&a.b).map_err(|e| anyhow::anyhow!("--b: {e}"))?;
+    let ov = overrides(&a.flags)?;
+    if let Some(dir) = &a.out
+        && dir.exists()
+        && !dir.is_dir()
+    {
+        bail!("--out {}: exists and is not a folder", dir.display());
+    }
+    // Load every scene first: bad input fails before any work or output.
+    let jobs: Vec<(String, Prepared)> = a
+        .scenes
+        .iter()
+        .map(|p| Ok((p.display().to_string(), Prepared::load(p, &ov)?)))
+        .collect::<Result<_>>()?;
+    let several = jobs.len() > 1;
+    let mut reports = Vec::new();
+    let mut entries = Vec::new();
+    for (label, job) in &jobs {
+        let r = diff::diff(job, label, &side_a, &side_b)?;
+        if let Some(dir) = &a.out {
+            let sub = if several {
+                job.scene.name()
+            } else {
+                String::new()
+            };
+            let target = if several { dir.join(&sub) } else { dir.clone() };
+            diff::write_outputs(&r, &target, encoding(&a.flags))?;
+            entries.push((r.report.clone(), sub));
+        }
+        if !a.json {
+            print!("{}", r.report.summary());
+        }
+        reports.push(r.report);
+    }
+    if let (Some(dir), true) = (&a.out, several) {
+        let html = index_html(&entries);
+        rendiff::image_io::write_atomic(&dir.join("index.html"), |f| {
+            std::io::Write::write_all(f, html.as_bytes())
+        })?;
+    }
+    if a.json {
+        let text = if several {
+            serde_json::to_string_pretty(&reports)?
+        } else {
+            serde_json::to_string_pretty(&reports[0])?
+        };
+        println!("{text}");
+    }
+    Ok(
+        if reports.iter().all(rendiff::compare::report::Report::passed) {
+            Outcome::Ok
+        } else {
+            Outcome::Differs
+        },
+    )
 }
 
 /// Runs `f` on a pool of `threads` workers (all cores when `None`).

@@ -1,0 +1,306 @@
+//! `rendiff diff`: render a scene two ways (or once, against an image) and
+//! deliver the verdict with its pictures.
+
+use std::path::{Path, PathBuf};
+
+use crate::color::Rgb;
+use crate::compare::maps::{self, Picture};
+use crate::compare::report::{Report, Times, scene_html};
+use crate::compare::{self, Comparison, ImageTolerances, Tolerances};
+use crate::frame::Frame;
+use crate::image_io::{self, PngEncoding};
+use crate::scene::LoadError;
+use crate::{Backend, Error, Prepared};
+
+/// One side of a comparison.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Side {
+    /// A backend renders it.
+    Backend(Backend),
+    /// A stored image (read as linear when 16-bit with gAMA 1.0, else sRGB).
+    Image(PathBuf),
+}
+
+impl Side {
+    /// Parses `--a`/`--b`: a path when the text contains `.` or `/`.
+    ///
+    /// # Errors
+    ///
+    /// A message naming the accepted values.
+    pub fn parse(s: &str) -> Result<Side, String> {
+        if s.contains('.') || s.contains('/') {
+            return Ok(Side::Image(PathBuf::from(s)));
+        }
+        s.parse::<Backend>().map(Side::Backend)
+    }
+
+    fn label(&self) -> String {
+        match self {
+            Side::Backend(b) => b.to_string(),
+            Side::Image(p) => p.display().to_string(),
+        }
+    }
+
+    fn traces_ray_tree(&self) -> bool {
+        matches!(self, Side::Backend(Backend::Ray))
+    }
+}
+
+/// What one side produced.
+#[derive(Debug)]
+pub enum Output {
+    /// A rendered frame and its time.
+    Frame(Frame, f64),
+    /// A stored image's pixels.
+    Image {
+        /// Width.
+        width: u32,
+        /// Height.
+        height: u32,
+        /// Linear pixels.
+        pixels: Vec<Rgb>,
+    },
+}
+
+impl Output {
+    fn pixels(&self) -> &[Rgb] {
+        match self {
+            Output::Frame(f, _) => &f.color,
+            Output::Image { pixels, .. } => pixels,
+        }
+    }
+
+    fn time(&self) -> Option<f64> {
+        match self {
+            Output::Frame(_, t) => Some(*t),
+            Output::Image { .. } => None,
+        }
+    }
+}
+
+/// The full result of one scene's diff.
+#[derive(Debug)]
+pub struct DiffResult {
+    /// The verdict.
+    pub report: Report,
+    /// The comparison behind it.
+    pub comparison: Comparison,
+    /// Side a.
+    pub a: Output,
+    /// Side b.
+    pub b: Output,
+    /// The tolerances used.
+    pub tolerance: Tolerances,
+}
+
+/// The tolerances of a scene: derived, tightened by its `[tolerance]` table.
+///
+/// # Errors
+///
+/// [`Error::Load`] naming the key when the scene asks for a looser value
+/// than the derived one.
+pub fn tolerances(job: &Prepared) -> Result<(Tolerances, ImageTolerances), Error> {
+    let mut t = compare::derive_tolerances(&job.tri);
+    let mut it = ImageTolerances::default();
+    let s = &job.scene.tolerance;
+    let path = &job.scene.path;
+    let looser = |key: &str, loc, value: f64, derived: f64, dir: &str| {
+        Error::Load(LoadError::Key {
+            path: path.clone(),
+            loc,
+            key: format!("tolerance.{key}"),
+            message: format!(
+                "{value} is looser than the derived {derived:.3e}; [tolerance] may only tighten ({dir})"
+            ),
+        })
+    };
+    if let Some(v) = s.shading_max {
+        if v.value > t.shading_max {
+            return Err(looser(
+                "shading_max",
+                v.loc,
+                v.value,
+                t.shading_max,
+                "use a value ≤ the derived one",
+            ));
+        }
+        t.shading_max = v.value;
+    }
+    if let Some(v) = s.pov_max8 {
+        if v.value > it.pov_max8 {
+            return Err(looser(
+                "pov_max8",
+                v.loc,
+                v.value,
+                it.pov_max8,
+                "use a value ≤ the derived one",
+            ));
+        }
+        it.pov_max8 = v.value;
+    }
+    if let Some(v) = s.pov_fraction {
+        if v.value < it.pov_fraction || v.value > 1.0 {
+            return Err(looser(
+                "pov_fraction",
+                v.loc,
+                v.value,
+                it.pov_fraction,
+                "use a value between the derived one and 1",
+            ));
+        }
+        it.pov_fraction = v.value;
+    }
+    Ok((t, it))
+}
+
+fn produce(job: &Prepared, side: &Side, max_depth: u32) -> Result<Output, Error> {
+    match side {
+        Side::Backend(b) => {
+            let r = job.render_with_depth(*b, max_depth);
+            Ok(Output::Frame(r.frame, r.time_ms))
+        }
+        Side::Image(p) => {
+            let img = image_io::read_png_linear(p)?;
+            let cam = &job.tri.camera;
+            if (img.width, img.height) != (cam.width(), cam.height()) {
+                return Err(Error::Usage(format!(
+                    "{}: the image is {}x{} but the scene renders {}x{} (use --size)",
+                    p.display(),
+                    img.width,
+                    img.height,
+                    cam.width(),
+                    cam.height()
+                )));
+            }
+            Ok(Output::Image {
+                width: img.width,
+                height: img.height,
+                pixels: img.pixels,
+            })
+        }
+    }
+}
+
+/// Renders (or reads) both sides and compares them.
+///
+/// # Errors
+///
+/// [`Error`] for a looser `[tolerance]`, an unreadable image or a size mismatch.
+pub fn diff(job: &Prepared, scene_label: &str, a: &Side, b: &Side) -> Result<DiffResult, Error> {
+    let (tol, image_tol) = tolerances(job)?;
+    let mut notes = Vec::new();
+    let mut max_depth = job.settings.max_depth;
+    let backends = [a, b]
+        .iter()
+        .filter(|s| matches!(s, Side::Backend(_)))
+        .count();
+    if backends == 2
+        && !(a.traces_ray_tree() && b.traces_ray_tree())
+        && max_depth > 1
+        && job.plan.ray_tree
+    {
+        let who = if a.traces_ray_tree() {
+            b.label()
+        } else {
+            a.label()
+        };
+        notes.push(format!(
+            "max_depth forced from {max_depth} to 1 on both sides: {who} shades locally and cannot trace the ray tree"
+        ));
+        max_depth = 1;
+    }
+    let out_a = produce(job, a, max_depth)?;
+    let out_b = produce(job, b, max_depth)?;
+    let cam = &job.tri.camera;
+    let (comparison, image_tol_used) = match (&out_a, &out_b) {
+        (Output::Frame(fa, _), Output::Frame(fb, _)) => (
+            compare::compare_frames(&job.tri, fa, fb, &tol, job.settings.depth),
+            None,
+        ),
+        _ => (
+            compare::compare_images(
+                cam.width(),
+                cam.height(),
+                out_a.pixels(),
+                out_b.pixels(),
+                &image_tol,
+                tol.shading_max,
+            ),
+            Some(image_tol),
+        ),
+    };
+    let report = Report::new(
+        scene_label,
+        (cam.width(), cam.height()),
+        (&a.label(), &b.label()),
+        max_depth,
+        &comparison,
+        &tol,
+        image_tol_used.as_ref(),
+        Times {
+            a: out_a.time(),
+            b: out_b.time(),
+        },
+        notes,
+    );
+    Ok(DiffResult {
+        report,
+        comparison,
+        a: out_a,
+        b: out_b,
+        tolerance: tol,
+    })
+}
+
+fn picture(out: &Output, w: u32, h: u32) -> Picture {
+    Picture::from_linear(w, h, out.pixels())
+}
+
+/// Writes a scene's pictures, `report.json` and `index.html` into `dir`.
+///
+/// # Errors
+///
+/// [`Error::Image`] on I/O failure.
+pub fn write_outputs(r: &DiffResult, dir: &Path, encoding: PngEncoding) -> Result<(), Error> {
+    std::fs::create_dir_all(dir).map_err(|source| {
+        Error::Image(image_io::ImageIoError::Io {
+            path: dir.to_path_buf(),
+            source,
+        })
+    })?;
+    let (w, h) = (r.report.width, r.report.height);
+    image_io::write_png(&dir.join("a.png"), w, h, r.a.pixels(), encoding)?;
+    image_io::write_png(&dir.join("b.png"), w, h, r.b.pixels(), encoding)?;
+    let heat = maps::heat_map(&r.comparison, w, h, r.report.tolerance.shading_max);
+    image_io::write_png_rgba8(&dir.join("heat.png"), w, h, &heat.rgba)?;
+    let mut panels: Vec<(String, Picture)> = vec![
+        (format!("A: {}", r.report.a), picture(&r.a, w, h)),
+        (format!("B: {}", r.report.b), picture(&r.b, w, h)),
+        ("SHADING ERROR".into(), heat),
+    ];
+    let mut images = vec![
+        ("a", "a.png"),
+        ("b", "b.png"),
+        ("shading error", "heat.png"),
+    ];
+    if r.comparison.visibility.is_some() {
+        let vis = maps::visibility_map(&r.comparison, w, h);
+        image_io::write_png_rgba8(&dir.join("visibility.png"), w, h, &vis.rgba)?;
+        panels.push(("VISIBILITY".into(), vis));
+        images.push(("visibility classes", "visibility.png"));
+    }
+    let refs: Vec<(&str, &Picture)> = panels.iter().map(|(l, p)| (l.as_str(), p)).collect();
+    if let Some(c) = maps::composite(&refs) {
+        image_io::write_png_rgba8(&dir.join("composite.png"), c.width, c.height, &c.rgba)?;
+        images.push(("side by side", "composite.png"));
+    }
+    let json = serde_json::to_string_pretty(&r.report).unwrap_or_default();
+    let write_text = |name: &str, text: &str| {
+        image_io::write_atomic(&dir.join(name), |f| {
+            std::io::Write::write_all(f, text.as_bytes())
+        })
+    };
+    write_text("report.json", &json)?;
+    write_text("index.html", &scene_html(&r.report, &images))?;
+    Ok(())
+}
