@@ -848,6 +848,91 @@ mod tests {
     }
 
     #[test]
+    fn errors_name_the_points_as_written() {
+        // A figure eight: the edges 0–1 and 2–3 cross.
+        let eight = xy(&[(0.0, 0.0), (2.0, 2.0), (2.0, 0.0), (0.0, 2.0)]);
+        let e = triangulate(&eight, &[], OPTS).unwrap_err();
+        assert_eq!(
+            e,
+            PolygonError::SelfIntersecting {
+                a: EdgeRef {
+                    hole: None,
+                    from: 0,
+                    to: 1
+                },
+                b: EdgeRef {
+                    hole: None,
+                    from: 2,
+                    to: 3
+                },
+            }
+        );
+        assert!(
+            e.to_string().starts_with(
+                "the outline's edge from point 0 to point 1 and the outline's edge from point 2 to point 3 cross"
+            ),
+            "{e}"
+        );
+        // A spike out to point 3 and back to point 2.
+        let spike = xy(&[
+            (0.0, 0.0),
+            (2.0, 0.0),
+            (2.0, 2.0),
+            (3.0, 3.0),
+            (2.0, 2.0),
+            (0.0, 2.0),
+        ]);
+        assert_eq!(
+            triangulate(&spike, &[], OPTS),
+            Err(PolygonError::Spike {
+                hole: None,
+                from: 2,
+                to: 3
+            })
+        );
+        // The point farthest from the plane is the one reported.
+        let mut raised = xy(&[(0.0, 0.0), (2.0, 0.0), (2.0, 2.0), (1.0, 3.0), (0.0, 2.0)]);
+        raised[3].z = 0.5;
+        assert!(matches!(
+            triangulate(&raised, &[], OPTS),
+            Err(PolygonError::NotPlanar {
+                point: PointRef {
+                    hole: None,
+                    index: 3
+                },
+                ..
+            })
+        ));
+        // Hole points are numbered within their hole.
+        let outline = xy(&[(0.0, 0.0), (4.0, 0.0), (4.0, 4.0), (0.0, 4.0)]);
+        let hole = vec![
+            DVec3::new(1.0, 1.0, 0.0),
+            DVec3::new(2.0, 1.0, f64::NAN),
+            DVec3::new(2.0, 2.0, 0.0),
+        ];
+        assert_eq!(
+            triangulate(&outline, &[hole], OPTS),
+            Err(PolygonError::NotFinite {
+                point: PointRef {
+                    hole: Some(0),
+                    index: 1
+                }
+            })
+        );
+    }
+
+    #[test]
+    fn hole_inside_another_hole_is_an_error() {
+        let outline = xy(&[(0.0, 0.0), (8.0, 0.0), (8.0, 8.0), (0.0, 8.0)]);
+        let big = xy(&[(1.0, 1.0), (7.0, 1.0), (7.0, 7.0), (1.0, 7.0)]);
+        let small = xy(&[(3.0, 3.0), (4.0, 3.0), (4.0, 4.0)]);
+        assert_eq!(
+            triangulate(&outline, &[big, small], OPTS),
+            Err(PolygonError::HoleInHole { hole: 1, other: 0 })
+        );
+    }
+
+    #[test]
     fn uv_must_be_affine() {
         let pts = xy(&[(0.0, 0.0), (2.0, 0.0), (2.0, 1.0), (0.0, 1.0)]);
         let n = DVec3::Z;

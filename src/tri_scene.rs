@@ -99,6 +99,47 @@ pub struct TriScene {
 }
 
 impl TriScene {
+    /// A scene of flat triangles with one default material, no lights and
+    /// a black background, as one object (closed if the triangles are): for
+    /// tests, benchmarks and experiments that build geometry directly.
+    #[must_use]
+    pub fn from_triangles(camera: Camera, triangles: &[[Vec3; 3]]) -> TriScene {
+        let positions: Vec<Vec3> = triangles.iter().flatten().copied().collect();
+        let n = u32::try_from(triangles.len()).unwrap_or(u32::MAX);
+        let tris: Vec<[u32; 3]> = (0..n).map(|t| [3 * t, 3 * t + 1, 3 * t + 2]).collect();
+        let bounds = Aabb::from_points(positions.iter().copied());
+        TriScene {
+            positions,
+            tris,
+            normals: Vec::new(),
+            tri_normals: vec![[NO_INDEX; 3]; triangles.len()],
+            uvs: Vec::new(),
+            tri_uvs: vec![[NO_INDEX; 3]; triangles.len()],
+            tri_material: vec![0; triangles.len()],
+            tri_object: vec![0; triangles.len()],
+            objects: vec![ObjectInfo {
+                label: "objects[0] (triangles)".into(),
+                kind: "mesh",
+                tris: 0..n,
+                bounds,
+                closed: false,
+                no_shadow: false,
+                material: 0,
+                smooth: false,
+                segments: None,
+            }],
+            materials: vec![Material::default()],
+            lights: Vec::new(),
+            camera,
+            background: Rgb::BLACK,
+            ambient_light: Rgb::WHITE,
+            max_depth: 1,
+            spheres: Vec::new(),
+            bounds,
+            warnings: Vec::new(),
+        }
+    }
+
     /// Number of triangles.
     #[must_use]
     pub fn len(&self) -> usize {

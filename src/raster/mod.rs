@@ -107,6 +107,18 @@ struct Record {
     y: [i32; 3],
     tri: u32,
     rows: (u32, u32),
+    /// A back face (doubled signed area ≥ 0 before orientation).
+    back: bool,
+}
+
+impl Record {
+    fn snapped(&self) -> Option<SnappedTri> {
+        SnappedTri::from_snapped([
+            (i64::from(self.x[0]), i64::from(self.y[0])),
+            (i64::from(self.x[1]), i64::from(self.y[1])),
+            (i64::from(self.x[2]), i64::from(self.y[2])),
+        ])
+    }
 }
 
 /// Interpolation planes of a triangle: `λ_i = b_i/w` and the depth plane,
@@ -237,12 +249,6 @@ pub fn visibility(scene: &TriScene, opts: &RasterOptions) -> VisibilityBuffers {
     let (sw, sh) = (cam.sample_width(), cam.sample_height());
     let hv = homogeneous(scene, opts.perturb);
     let perspective = matches!(cam.projection(), Projection::Perspective { .. });
-    let clip_planes = planes(
-        cam.near(),
-        f64::from(cam.width()),
-        f64::from(cam.height()),
-        GUARD_PX,
-    );
 
     // Setup: per chunk of triangles, in id order.
     let chunk = 4096usize;
@@ -250,31 +256,18 @@ pub fn visibility(scene: &TriScene, opts: &RasterOptions) -> VisibilityBuffers {
     let chunks: Vec<Vec<Record>> = (0..n_tris.div_ceil(chunk))
         .into_par_iter()
         .map(|c| {
-            let mut out = Vec::new();
-            let mut poly = Vec::with_capacity(8);
-            let mut tmp = Vec::with_capacity(8);
-            for t in c * chunk..((c + 1) * chunk).min(n_tris) {
-                let obj = scene.tri_object[t] as usize;
-                if opts.frustum_cull.get(obj).copied().unwrap_or(false) {
-                    continue;
-                }
-                let cull_back = opts.backface_cull.get(obj).copied().unwrap_or(false);
-                let tri_id = u32::try_from(t).unwrap_or(u32::MAX);
-                let idx = scene.tris[t];
-                let v = idx.map(|i| hv[i as usize]);
-                setup_triangle(
-                    &v,
-                    tri_id,
-                    cull_back,
-                    &clip_planes,
-                    &grid,
-                    (sw, sh),
-                    &mut poly,
-                    &mut tmp,
-                    &mut out,
-                );
-            }
-            out
+            records(
+                scene,
+                &hv,
+                c * chunk..((c + 1) * chunk).min(n_tris),
+                &grid,
+                |obj| {
+                    (
+                        opts.frustum_cull.get(obj).copied().unwrap_or(false),
+                        opts.backface_cull.get(obj).copied().unwrap_or(false),
+                    )
+                },
+            )
         })
         .collect();
     let records: Vec<Record> = chunks.into_iter().flatten().collect();
@@ -415,6 +408,7 @@ fn setup_triangle(
             y: vs.map(|q| q.1 as i32),
             tri,
             rows: (rows.start, rows.end),
+            back: st.is_back_facing(),
         });
     }
 }
@@ -462,6 +456,72 @@ fn triangle_planes(v: &[HVert; 3], perspective: bool, ax: f64, ay: f64) -> Optio
     })
 }
 
+/// Walks the covered samples of one record over `rows`, stepping the
+/// perspective-correct planes incrementally along each span (anchored by
+/// direct evaluation at the span's first sample). `visit(row, col, λ, d)`
+/// receives the stepped `λ_i = b_i/w` and depth-plane value of each sample.
+#[expect(clippy::too_many_arguments, reason = "the record and its frame")]
+fn walk_record(
+    scene: &TriScene,
+    hv: &[HVert],
+    r: &Record,
+    grid: &SampleGrid,
+    rows: std::ops::Range<u32>,
+    sw: u32,
+    perspective: bool,
+    mut visit: impl FnMut(u32, u32, &[f64; 3], f64, &Planes),
+) {
+    let Some(st) = r.snapped() else {
+        return;
+    };
+    let idx = scene.tris[r.tri as usize];
+    let v = idx.map(|i| hv[i as usize]);
+    let (ax, ay) = (f64::from(r.x[0]) / 256.0, f64::from(r.y[0]) / 256.0);
+    let Some(pl) = triangle_planes(&v, perspective, ax, ay) else {
+        return;
+    };
+    let n = f64::from(grid.n);
+    let dx = 1.0 / n;
+    let step_l = [
+        pl.lambda[0][0] * dx,
+        pl.lambda[1][0] * dx,
+        pl.lambda[2][0] * dx,
+    ];
+    let step_d = pl.depth[0] * dx;
+    st.for_each_span(grid, rows, 0..sw, |row, cols| {
+        // Anchor: direct evaluation at the span's first sample.
+        let x0 = (f64::from(cols.start) + 0.5) / n - pl.ax;
+        let y = (f64::from(row) + 0.5) / n - pl.ay;
+        let mut l = [
+            Planes::eval(&pl.lambda[0], x0, y),
+            Planes::eval(&pl.lambda[1], x0, y),
+            Planes::eval(&pl.lambda[2], x0, y),
+        ];
+        let mut d = Planes::eval(&pl.depth, x0, y);
+        for col in cols {
+            visit(row, col, &l, d, &pl);
+            l[0] += step_l[0];
+            l[1] += step_l[1];
+            l[2] += step_l[2];
+            d += step_d;
+        }
+    });
+}
+
+/// Normalised barycentrics from the stepped `λ`, rounded once to `f32`.
+#[inline]
+fn bary_of(l: &[f64; 3]) -> [f32; 3] {
+    let sum = l[0] + l[1] + l[2];
+    [l[0] / sum, l[1] / sum, l[2] / sum].map(|x| {
+        #[expect(
+            clippy::cast_possible_truncation,
+            reason = "one rounding of the f64 weights"
+        )]
+        let f = x as f32;
+        f
+    })
+}
+
 /// Scans one record over `rows` (a band); returns (depth writes, fragments).
 #[expect(
     clippy::too_many_arguments,
@@ -480,66 +540,163 @@ fn scan_record(
     id: &mut [u32],
     bary: &mut [[f32; 3]],
 ) -> (u64, u64) {
-    let Some(st) = SnappedTri::from_snapped([
-        (i64::from(r.x[0]), i64::from(r.y[0])),
-        (i64::from(r.x[1]), i64::from(r.y[1])),
-        (i64::from(r.x[2]), i64::from(r.y[2])),
-    ]) else {
-        return (0, 0);
-    };
-    let idx = scene.tris[r.tri as usize];
-    let v = idx.map(|i| hv[i as usize]);
-    let (ax, ay) = (f64::from(r.x[0]) / 256.0, f64::from(r.y[0]) / 256.0);
-    let Some(pl) = triangle_planes(&v, perspective, ax, ay) else {
-        return (0, 0);
-    };
-    let n = f64::from(grid.n);
-    let dx = 1.0 / n;
     let row0 = rows.start;
-    let step_l = [
-        pl.lambda[0][0] * dx,
-        pl.lambda[1][0] * dx,
-        pl.lambda[2][0] * dx,
-    ];
-    let step_d = pl.depth[0] * dx;
     let mut writes = 0u64;
     let mut frags = 0u64;
-    st.for_each_span(grid, rows, 0..sw, |row, cols| {
-        // Anchor: direct evaluation at the span's first sample.
-        let x0 = (f64::from(cols.start) + 0.5) / n - pl.ax;
-        let y = (f64::from(row) + 0.5) / n - pl.ay;
-        let mut l = [
-            Planes::eval(&pl.lambda[0], x0, y),
-            Planes::eval(&pl.lambda[1], x0, y),
-            Planes::eval(&pl.lambda[2], x0, y),
-        ];
-        let mut d = Planes::eval(&pl.depth, x0, y);
-        let base = ((row - row0) * sw) as usize;
-        for s in cols.clone() {
-            let i = base + s as usize;
+    walk_record(
+        scene,
+        hv,
+        r,
+        grid,
+        rows,
+        sw,
+        perspective,
+        |row, col, l, d, _| {
+            let i = ((row - row0) * sw + col) as usize;
             let k = depth_map.key(d);
             frags += 1;
             if k < key[i] || (k == key[i] && r.tri < id[i]) {
                 key[i] = k;
                 id[i] = r.tri;
-                let sum = l[0] + l[1] + l[2];
-                bary[i] = [l[0] / sum, l[1] / sum, l[2] / sum].map(|x| {
-                    #[expect(
-                        clippy::cast_possible_truncation,
-                        reason = "one rounding of the f64 weights"
-                    )]
-                    let f = x as f32;
-                    f
-                });
+                bary[i] = bary_of(l);
                 writes += 1;
             }
-            l[0] += step_l[0];
-            l[1] += step_l[1];
-            l[2] += step_l[2];
-            d += step_d;
-        }
-    });
+        },
+    );
     (writes, frags)
+}
+
+/// The records of the triangles in `range`, in id order; `cull(object)`
+/// says whether to skip the object (frustum) and whether to cull its back
+/// faces.
+fn records(
+    scene: &TriScene,
+    hv: &[HVert],
+    range: std::ops::Range<usize>,
+    grid: &SampleGrid,
+    cull: impl Fn(usize) -> (bool, bool),
+) -> Vec<Record> {
+    let cam = &scene.camera;
+    let clip_planes = planes(
+        cam.near(),
+        f64::from(cam.width()),
+        f64::from(cam.height()),
+        GUARD_PX,
+    );
+    let (sw, sh) = (cam.sample_width(), cam.sample_height());
+    let mut out = Vec::new();
+    let mut poly = Vec::with_capacity(8);
+    let mut tmp = Vec::with_capacity(8);
+    for t in range {
+        let (skip, cull_back) = cull(scene.tri_object[t] as usize);
+        if skip {
+            continue;
+        }
+        let v = scene.tris[t].map(|i| hv[i as usize]);
+        let tri = u32::try_from(t).unwrap_or(u32::MAX);
+        setup_triangle(
+            &v,
+            tri,
+            cull_back,
+            &clip_planes,
+            grid,
+            (sw, sh),
+            &mut poly,
+            &mut tmp,
+            &mut out,
+        );
+    }
+    out
+}
+
+/// Calls `visit(tri, sx, sy, front)` for every sample the coverage rule
+/// gives each triangle (after near/guard clipping), serially, triangle by
+/// triangle in id order; `front` is false for a back face (doubled signed
+/// area ≥ 0). With `backface_cull`, back faces are skipped.
+pub fn cover(scene: &TriScene, backface_cull: bool, mut visit: impl FnMut(u32, u32, u32, bool)) {
+    let cam = &scene.camera;
+    let grid = SampleGrid::new(cam.samples());
+    let hv = homogeneous(scene, Perturb::default());
+    for r in records(scene, &hv, 0..scene.len(), &grid, |_| {
+        (false, backface_cull)
+    }) {
+        let Some(st) = r.snapped() else { continue };
+        st.for_each_span(
+            &grid,
+            r.rows.0..r.rows.1,
+            0..cam.sample_width(),
+            |row, cols| {
+                for c in cols {
+                    visit(r.tri, c, row, !r.back);
+                }
+            },
+        );
+    }
+}
+
+/// Drift of the incremental interpolation against direct evaluation, over
+/// every covered sample of a scene.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Drift {
+    /// Samples compared.
+    pub samples: u64,
+    /// Largest |stepped − direct| / |direct| of the depth plane.
+    pub depth_rel: f64,
+    /// Largest |stepped − direct| of a normalised barycentric weight.
+    pub bary_abs: f64,
+    /// Largest span length in samples.
+    pub longest_span: u32,
+}
+
+/// Measures the drift of the incremental depth and barycentrics (the same
+/// walk the renderer uses) against direct evaluation of the planes.
+#[must_use]
+pub fn measure_drift(scene: &TriScene) -> Drift {
+    let cam = &scene.camera;
+    let grid = SampleGrid::new(cam.samples());
+    let hv = homogeneous(scene, Perturb::default());
+    let perspective = matches!(cam.projection(), Projection::Perspective { .. });
+    let n = f64::from(grid.n);
+    let mut drift = Drift::default();
+    for r in records(scene, &hv, 0..scene.len(), &grid, |_| (false, false)) {
+        let mut span_len = 0u32;
+        let mut last_row = u32::MAX;
+        walk_record(
+            scene,
+            &hv,
+            &r,
+            &grid,
+            r.rows.0..r.rows.1,
+            cam.sample_width(),
+            perspective,
+            |row, col, l, d, pl| {
+                if row != last_row {
+                    last_row = row;
+                    span_len = 0;
+                }
+                span_len += 1;
+                drift.longest_span = drift.longest_span.max(span_len);
+                let x = (f64::from(col) + 0.5) / n - pl.ax;
+                let y = (f64::from(row) + 0.5) / n - pl.ay;
+                let direct = [
+                    Planes::eval(&pl.lambda[0], x, y),
+                    Planes::eval(&pl.lambda[1], x, y),
+                    Planes::eval(&pl.lambda[2], x, y),
+                ];
+                let dd = Planes::eval(&pl.depth, x, y);
+                if dd != 0.0 {
+                    drift.depth_rel = drift.depth_rel.max(((d - dd) / dd).abs());
+                }
+                let sum_s = l[0] + l[1] + l[2];
+                let sum_d = direct[0] + direct[1] + direct[2];
+                for k in 0..3 {
+                    drift.bary_abs = drift.bary_abs.max((l[k] / sum_s - direct[k] / sum_d).abs());
+                }
+                drift.samples += 1;
+            },
+        );
+    }
+    drift
 }
 
 fn shade_pass(scene: &TriScene, opts: &RasterOptions, vis: &VisibilityBuffers) -> Frame {

@@ -263,6 +263,40 @@ impl Scene {
             .map_or_else(|| "scene".to_string(), |s| s.to_string_lossy().into_owned())
     }
 
+    /// The same scene with every length scaled by `scale` and everything
+    /// moved by `offset`: camera (eye, target, near, far), lights (with
+    /// their fade distances) and objects. Images look the same at any
+    /// scale, which is what the numerical-stability tests check.
+    #[must_use]
+    pub fn scaled(&self, scale: f64, offset: DVec3) -> Scene {
+        let mut s = self.clone();
+        let map = |p: DVec3| p * scale + offset;
+        s.camera.eye = map(s.camera.eye);
+        s.camera.look_at = map(s.camera.look_at);
+        s.camera.near *= scale;
+        s.camera.far = s.camera.far.map(|f| f * scale);
+        if let ProjectionDesc::Orthographic { view_height } = &mut s.camera.projection {
+            *view_height *= scale;
+        }
+        #[expect(clippy::cast_possible_truncation, reason = "light data is f32")]
+        for l in &mut s.lights {
+            if let LightKind::Point { position } = &mut l.kind {
+                *position = to_f32(map(crate::math::to_f64(*position)));
+            }
+            if let Some((d, _)) = &mut l.fade {
+                *d = (f64::from(*d) * scale) as f32;
+            }
+        }
+        for o in &mut s.objects {
+            o.steps.push(TransformStep::Scale(DVec3::splat(scale)));
+            o.steps.push(TransformStep::Translate(offset));
+            if let Some(t) = Transform::from_steps(&o.steps) {
+                o.transform = t;
+            }
+        }
+        s
+    }
+
     /// Loads and validates a scene file.
     ///
     /// # Errors
@@ -514,7 +548,7 @@ impl Loader {
                 return Err(t.err(
                     &v.span,
                     "view_height",
-                    "only for projection = \"orthographic\"",
+                    "view_height is only for projection = \"orthographic\"; a perspective camera uses fov_y",
                 ));
             }
             let fov = fov.ok_or_else(|| t.missing("fov_y"))?;
@@ -530,7 +564,11 @@ impl Loader {
             }
         } else {
             if let Some(v) = fov {
-                return Err(t.err(&v.span, "fov_y", "only for projection = \"perspective\""));
+                return Err(t.err(
+                    &v.span,
+                    "fov_y",
+                    "fov_y is only for projection = \"perspective\"; an orthographic camera uses view_height",
+                ));
             }
             let vh = vh.ok_or_else(|| t.missing("view_height"))?;
             if vh.value <= 0.0 {
@@ -838,13 +876,22 @@ impl Loader {
         }
         let here = |key: &str| spans.get(key).map(|s| s.0.clone()).unwrap_or_default();
         let written = |key: &str, default: f32| spans.get(key).map_or(f64::from(default), |s| s.1);
+        // A positive value that is 0 once stored in f32 must not read "got 1e-50".
+        let shown = |key: &str, stored: f32| {
+            let w = written(key, stored);
+            if w > 0.0 && stored == 0.0 {
+                format!("{}, which is 0 in f32", num(w))
+            } else {
+                num(w)
+            }
+        };
         if m.roughness <= 0.0 {
             return Err(t.err(
                 &here("roughness"),
                 "roughness",
                 format!(
                     "expected > 0 (the specular exponent is 1/roughness), got {}",
-                    num(written("roughness", m.roughness))
+                    shown("roughness", m.roughness)
                 ),
             ));
         }
@@ -852,7 +899,7 @@ impl Loader {
             return Err(t.err(
                 &here("ior"),
                 "ior",
-                format!("expected > 0, got {}", num(written("ior", m.ior))),
+                format!("expected > 0, got {}", shown("ior", m.ior)),
             ));
         }
         if m.filter + m.transmit > 1.0 {

@@ -486,6 +486,29 @@ mod tests {
     }
 
     #[test]
+    fn bad_numbers_and_faces_say_what_is_wrong() {
+        let e = load("v 0 0,5 0\n").unwrap_err().to_string();
+        assert_eq!(e, "t.obj:1: `0,5` is not a number");
+        let e = load("v 0 inf 0\n").unwrap_err().to_string();
+        assert_eq!(e, "t.obj:1: `inf` is not a finite number");
+        let e = load("v 0 1e39 0\n").unwrap_err().to_string();
+        assert!(e.contains("outside the f32 range"), "{e}");
+        // A bow-tie quad: its edges are named by the corners as written.
+        let e = load("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 3 2 4\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("t.obj:5: the face's edges `1`–`3` and `2`–`4` cross"),
+            "{e}"
+        );
+        let e = load("\x01\x02 3\n").unwrap_err().to_string();
+        assert!(
+            e.contains("`\\u{1}\\u{2}`") && e.contains("is this an OBJ file?"),
+            "{e}"
+        );
+    }
+
+    #[test]
     fn negative_indices_and_lossy_utf8() {
         let mut bytes = b"# caf\xe9\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf -3 -2 -1\n".to_vec();
         bytes.push(b'\n');
