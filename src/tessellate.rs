@@ -25,6 +25,18 @@ use crate::math::{Aabb, DMat3, DVec3, Vec2, Vec3, to_f32, to_f64};
 use crate::scene::{LoadError, MAX_COORDINATE, Object, ProjectionDesc, Scene, Shape};
 use crate::tri_scene::{AnalyticSphere, NO_INDEX, ObjectInfo, TriScene};
 
+/// Samples per triangle side when measuring a superellipsoid's chord error
+/// (28 points per triangle).
+const SUPERELLIPSOID_SAMPLES: u32 = 6;
+
+/// The sampled maximum of the chord error underestimates the continuous
+/// one: on the exponents of the tests (<1,1>, <0.3,0.6>, <2,0.5>, <1,2.5>,
+/// <0.25,0.25>), sampling with 16 steps per side (153 points per triangle)
+/// and 20 000 radial rays found at most 3.3 % more than 6 steps per side.
+/// Segments are chosen for 0.9 × the tolerance, three times that
+/// underestimate; the tessellation test checks the ratio stays below 1/0.9.
+const SUPERELLIPSOID_MARGIN: f64 = 0.9;
+
 /// Largest segment count (DESIGN.md §4).
 pub const MAX_SEGMENTS: u32 = 4096;
 
@@ -278,28 +290,47 @@ fn superellipsoid_normal(e: f64, n: f64, p: DVec3) -> Option<DVec3> {
     g.is_finite().then(|| g.try_normalize()).flatten()
 }
 
-/// Unit directions with poles on ±z (POV-Ray's superellipsoid axis),
-/// arranged as the sphere grid with y and z exchanged (keeping the winding).
-fn superellipsoid_grid(n: u32) -> (Vec<DVec3>, Vec<[u32; 3]>) {
-    let (verts, tris) = sphere_grid(n);
-    // (x, y, z) -> (x, z, -y) is a rotation (det +1): winding is kept.
-    let dirs = verts
+/// `sign(v)·|v|^p`.
+fn signed_pow(v: f64, p: f64) -> f64 {
+    v.abs().powf(p).copysign(v)
+}
+
+/// Points of a superellipsoid on the sphere grid's topology, poles on ±z
+/// (POV-Ray's north-south axis), by the classic superquadric
+/// parameterisation: latitude η, longitude ω,
+/// `x = cos(η)^n cos(ω)^e, y = cos(η)^n sin(ω)^e, z = sin(η)^n` (signed
+/// powers). It places samples by curvature: few on flat faces, many at the
+/// rounded edges of boxy shapes and at the cusps of pinched ones (e or
+/// n > 2), where a uniform grid of directions would need far more segments.
+fn superellipsoid_grid(e: f64, n: f64, segments: u32) -> (Vec<DVec3>, Vec<[u32; 3]>) {
+    let (verts, tris) = sphere_grid(segments);
+    let pts = verts
         .iter()
-        .map(|(d, _)| DVec3::new(d.x, -d.z, d.y))
+        .map(|(d, _)| {
+            // The sphere grid's direction (x, y, z) with the pole on y; on
+            // the superellipsoid the pole is z: (x, y, z) -> (x, -z, y) is a
+            // rotation, so the winding stays outward.
+            let q = DVec3::new(d.x, -d.z, d.y);
+            let eta = q.z.clamp(-1.0, 1.0).asin();
+            let omega = q.y.atan2(q.x);
+            let (ce, se) = (eta.cos(), eta.sin());
+            let r = signed_pow(ce, n);
+            DVec3::new(
+                r * signed_pow(omega.cos(), e),
+                r * signed_pow(omega.sin(), e),
+                signed_pow(se, n),
+            )
+        })
         .collect();
-    (dirs, tris)
+    (pts, tris)
 }
 
 /// Measured chord error of a superellipsoid tessellation: for every
-/// triangle, the radial distance between the surface and the triangle at
-/// 10 points (the centroid, the edge midpoints and 6 more), maximised.
+/// triangle, the radial distance between the surface and the triangle on a
+/// barycentric grid of `samples_per_side` steps, maximised.
 #[must_use]
 pub fn superellipsoid_chord_error(e: f64, n: f64, segments: u32, samples_per_side: u32) -> f64 {
-    let (dirs, tris) = superellipsoid_grid(segments);
-    let pts: Vec<DVec3> = dirs
-        .iter()
-        .map(|d| superellipsoid_point(e, n, *d))
-        .collect();
+    let (pts, tris) = superellipsoid_grid(e, n, segments);
     let k = f64::from(samples_per_side.max(2));
     let mut worst: f64 = 0.0;
     for t in &tris {
@@ -321,16 +352,13 @@ pub fn superellipsoid_chord_error(e: f64, n: f64, segments: u32, samples_per_sid
 }
 
 fn superellipsoid_piece(e: f64, n: f64, segments: u32) -> Piece {
-    let (dirs, tris) = superellipsoid_grid(segments);
+    let (pts, tris) = superellipsoid_grid(e, n, segments);
     let mut p = Piece {
         smooth: true,
         segments: Some(segments.max(3)),
         ..Piece::default()
     };
-    p.positions = dirs
-        .iter()
-        .map(|d| superellipsoid_point(e, n, *d))
-        .collect();
+    p.positions = pts;
     // Gradient normals; at cusps (e or n > 2 on an axis) the area-weighted
     // normal of the vertex's triangles instead.
     let mut fallback = vec![DVec3::ZERO; p.positions.len()];
@@ -550,9 +578,9 @@ fn object_piece(
             sphere_piece(*center, *radius, n)
         }
         Shape::Superellipsoid { e, n: ns } => {
-            let tol = object_tolerance(DVec3::ZERO, 3f64.sqrt());
+            let tol = SUPERELLIPSOID_MARGIN * object_tolerance(DVec3::ZERO, 3f64.sqrt());
             let (n, capped) = choose_segments(obj.tessellation, tol, |k| {
-                superellipsoid_chord_error(*e, *ns, k, 3)
+                superellipsoid_chord_error(*e, *ns, k, SUPERELLIPSOID_SAMPLES)
             });
             if capped {
                 warnings.push(format!(

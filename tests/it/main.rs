@@ -1,2 +1,8 @@
-//! Integration tests (one binary).
+//! Integration tests (one binary). Each module says what it covers.
+
+/// Bad input: every file of tests/data/bad gives exit 2 and a located message.
 mod bad_input;
+/// Tessellation: chord error bounds and closedness.
+mod tessellation;
+/// Helpers shared by the modules.
+mod util;
