@@ -482,7 +482,10 @@ impl Bvh {
         while sp > 0 {
             sp -= 1;
             let (child, count, t_near) = stack[sp];
-            if t_near > *t_max {
+            // t_near carries rounding error too: compare it with t_max
+            // enlarged like t_far, so a box holding a hit at exactly t_max
+            // (a tie, decided by id) is still visited.
+            if t_near > *t_max * grow {
                 continue;
             }
             if child & LEAF != 0 {
@@ -500,7 +503,7 @@ impl Bvh {
             let tz1 = (n.max_z - oz) * iz;
             let tn = tx0.min(tx1).max(ty0.min(ty1)).max(tz0.min(tz1)).max(t_min4);
             let tf = tx0.max(tx1).min(ty0.max(ty1)).min(tz0.max(tz1)) * grow;
-            let tf = tf.min(Vec4::splat(*t_max));
+            let tf = tf.min(Vec4::splat(*t_max * grow));
             let mask = tn.cmple(tf).bitmask();
             if mask == 0 {
                 continue;

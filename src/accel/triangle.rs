@@ -104,16 +104,22 @@ pub fn intersect(pre: &RayPrecomp, v: &[Vec3; 3], t_min: f32, t_max: f32) -> Opt
     let bz = sz * b[kz];
     let cz = sz * c[kz];
     let t_scaled = u * az + vv * bz + w * cz;
-    // Range test without dividing: compare T with t·det on det's side.
+    // Reject hits behind t_min without dividing (T and det must have the
+    // same sign and |T| ≥ t_min·|det|); the far bound is compared after the
+    // division, on the very value that is returned, so that a tie at
+    // exactly t_max (equal t from another triangle) is always seen.
     if det > 0.0 {
-        if t_scaled < t_min * det || t_scaled > t_max * det {
+        if t_scaled < t_min * det {
             return None;
         }
-    } else if t_scaled > t_min * det || t_scaled < t_max * det {
+    } else if t_scaled > t_min * det {
         return None;
     }
     let inv = 1.0 / det;
     let t = t_scaled * inv;
+    if t > t_max || t < t_min {
+        return None;
+    }
 
     // pbrt-v4: reject t within the rounding error of 0.
     let max_zt = az.abs().max(bz.abs()).max(cz.abs());

@@ -135,10 +135,10 @@ fn sample_error(a: Rgb, b: Rgb) -> f32 {
 
 /// Derives the tolerances of a raster-vs-ray comparison for a scene.
 ///
-/// * ε_edge = the snapping bound √2·2⁻⁹ px + the ray's own angular error
-///   (γ(16) radians, mapped to pixels with the camera's largest
-///   magnification), or for orthographic cameras γ(16) of the scene's
-///   extent in pixels.
+/// * ε_edge = the snapping bound √2·2⁻⁹ px + the ray tracer's own error:
+///   γ(16) radians of direction (mapped to pixels with the camera's largest
+///   magnification) and γ(16)·(|eye|∞ + |bounds|∞) of position (the f32 ray
+///   origin and vertices), in pixels at the nearest view depth of the bounds.
 /// * δ_near = γ(16)·(|eye|∞ + |bounds|∞ + near): the absolute error of the
 ///   ray parameter near the eye.
 /// * ε_g = [`crate::GATE_EPS`].
@@ -154,13 +154,24 @@ pub fn derive_tolerances(scene: &TriScene) -> Tolerances {
     let b = scene.bounds;
     let extent = f64::from(b.min.abs().max(b.max.abs()).max_element());
     let eye = cam.eye().abs().max_element();
+    // The ray tracer's positions are f32: the eye (ray origin) and every
+    // vertex relative to it carry γ(16)·(|eye|∞ + |bounds|∞) of absolute
+    // error, which the screen magnifies most at the nearest view depth.
+    let position_error = g * (extent + eye);
+    let z_min = b
+        .corners()
+        .iter()
+        .map(|c| cam.view_depth(crate::math::to_f64(*c)))
+        .fold(f64::INFINITY, f64::min)
+        .max(cam.near());
     let proj = match cam.projection() {
         Projection::Perspective { tan_half_fov: t } => {
+            // Its directions carry γ(16) radians of error besides.
             let a = cam.aspect();
             let px_per_rad = h / (2.0 * t) * (1.0 + t * t * (1.0 + a * a));
-            g * px_per_rad
+            g * px_per_rad + position_error * cam.max_pixels_per_unit(z_min)
         }
-        Projection::Orthographic { view_height } => g * (extent + eye) * h / view_height,
+        Projection::Orthographic { view_height } => position_error * h / view_height,
     };
     Tolerances {
         edge_px: crate::coverage::SNAP_BOUND_PX + proj,

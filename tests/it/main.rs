@@ -2,6 +2,8 @@
 
 /// Bad input: every file of tests/data/bad gives exit 2 and a located message.
 mod bad_input;
+/// The ray tracer: BVH, watertightness, self-hits, threads, shading.
+mod ray;
 /// Tessellation: chord error bounds and closedness.
 mod tessellation;
 /// Helpers shared by the modules.

@@ -1,0 +1,812 @@
+//! The ray tracer: BVH against brute force, watertightness, no self-hits
+//! at any scale, thread-count invariance, and shading against a
+//! hand-written f64 reference on a lit sphere.
+
+use rendiff::accel::{Accel, AccelOptions, ShadowRays};
+use rendiff::camera::{Camera, Projection};
+use rendiff::compare::{Class, Oracle, derive_tolerances};
+use rendiff::frame::{BACKGROUND, Frame};
+use rendiff::math::{DVec3, Ray, Vec3, to_f32, to_f64};
+use rendiff::options::{DepthFormat, Geometry};
+use rendiff::scene::Scene;
+use rendiff::shade::Visibility;
+use rendiff::tri_scene::TriScene;
+use rendiff::{Backend, Overrides, Prepared};
+
+use crate::util::{Rng, load, scene_path, with_threads};
+
+fn camera() -> Camera {
+    Camera::new(
+        DVec3::new(0.0, 0.0, 5.0),
+        DVec3::ZERO,
+        DVec3::Y,
+        Projection::Perspective { tan_half_fov: 0.5 },
+        64,
+        64,
+        1,
+        0.01,
+        100.0,
+    )
+    .unwrap()
+}
+
+fn random_dir(rng: &mut Rng) -> Vec3 {
+    loop {
+        let d = Vec3::new(
+            rng.rangef(-1.0, 1.0),
+            rng.rangef(-1.0, 1.0),
+            rng.rangef(-1.0, 1.0),
+        );
+        if d.length() > 0.05 && d.length() <= 1.0 {
+            return d.normalize();
+        }
+    }
+}
+
+/// Closest hits and shadow transmittance of a BVH equal those of a flat
+/// loop over all triangles (the brute force): same triangle, same `t` bits.
+fn assert_bvh_matches_brute_force(t: &TriScene, rays: usize, seed: u64) {
+    let bvh = Accel::new(
+        t,
+        AccelOptions {
+            geometry: Geometry::Mesh,
+            bvh: true,
+        },
+    );
+    let flat = Accel::new(
+        t,
+        AccelOptions {
+            geometry: Geometry::Mesh,
+            bvh: false,
+        },
+    );
+    let (sb, sf) = (ShadowRays::new(&bvh), ShadowRays::new(&flat));
+    let b = t.bounds;
+    let (c, r) = b.bounding_sphere();
+    let mut rng = Rng(seed);
+    let mut hits = 0;
+    for k in 0..rays {
+        // Origins around and inside the bounds; half the rays aimed at a
+        // random point of a random triangle, half at a random point of the bounds.
+        let o = c + random_dir(&mut rng) * r * rng.rangef(0.0, 2.5);
+        let target = if k % 2 == 0 {
+            let v = t.triangle(rng.below(t.len() as u64) as u32);
+            let (u, w) = (rng.rangef(0.0, 1.0), rng.rangef(0.0, 1.0));
+            let (u, w) = if u + w > 1.0 {
+                (1.0 - u, 1.0 - w)
+            } else {
+                (u, w)
+            };
+            v[0] + (v[1] - v[0]) * u + (v[2] - v[0]) * w
+        } else {
+            b.min
+                + (b.max - b.min)
+                    * Vec3::new(
+                        rng.rangef(0.0, 1.0),
+                        rng.rangef(0.0, 1.0),
+                        rng.rangef(0.0, 1.0),
+                    )
+        };
+        let Some(dir) = (target - o).try_normalize() else {
+            continue;
+        };
+        let ray = Ray {
+            origin: o,
+            dir,
+            t_min: 0.0,
+            t_max: f32::INFINITY,
+        };
+        let (x, y) = (bvh.intersect(&ray), flat.intersect(&ray));
+        assert_eq!(
+            x.map(|h| (h.prim, h.t.to_bits())),
+            y.map(|h| (h.prim, h.t.to_bits())),
+            "seed {seed}, ray {k}: {ray:?}"
+        );
+        hits += usize::from(x.is_some());
+        let tmax = rng.rangef(0.0, 3.0) * r;
+        assert_eq!(
+            sb.transmittance(0, o, dir, tmax),
+            sf.transmittance(0, o, dir, tmax),
+            "seed {seed}, shadow ray {k}"
+        );
+    }
+    assert!(
+        hits > rays / 3,
+        "only {hits} of {rays} rays hit: the test aims badly"
+    );
+}
+
+#[test]
+fn bvh_equals_brute_force_on_random_triangles() {
+    let mut rng = Rng(7);
+    let tris: Vec<[Vec3; 3]> = (0..3000)
+        .map(|_| {
+            let c = Vec3::new(
+                rng.rangef(-2.0, 2.0),
+                rng.rangef(-2.0, 2.0),
+                rng.rangef(-2.0, 2.0),
+            );
+            let s = rng.rangef(0.01, 0.4);
+            [
+                c,
+                c + random_dir(&mut rng) * s,
+                c + random_dir(&mut rng) * s,
+            ]
+        })
+        .collect();
+    let t = TriScene::from_triangles(camera(), &tris);
+    assert_bvh_matches_brute_force(&t, 20_000, 11);
+}
+
+#[test]
+fn bvh_equals_brute_force_on_real_meshes() {
+    for (name, seed) in [("bunny", 1), ("dense", 2), ("inside", 3)] {
+        let job = load(name, &Overrides::default());
+        assert_bvh_matches_brute_force(&job.tri, 4_000, seed);
+    }
+}
+
+/// Closed meshes: tessellated spheres (several segment counts), a box, a
+/// superellipsoid and the real closed meshes (cow, knot, elephant, bunny).
+fn closed_meshes() -> Vec<TriScene> {
+    let mut out = Vec::new();
+    for (name, ..) in [
+        ("inside", 0),
+        ("menagerie", 0),
+        ("bunny", 0),
+        ("spheres", 0),
+        ("superellipsoids", 0),
+    ] {
+        let job = load(name, &Overrides::default());
+        for o in job.tri.objects.iter().filter(|o| o.closed) {
+            let tris: Vec<[Vec3; 3]> = o.tris.clone().map(|k| job.tri.triangle(k)).collect();
+            let mut t = TriScene::from_triangles(camera(), &tris);
+            t.objects[0].closed = true;
+            out.push(t);
+        }
+    }
+    out
+}
+
+/// Number of surface crossings of the ray from `p` along `dir`, counted by
+/// repeated closest-hit queries, each starting 8 ulps beyond the last hit
+/// (the same triangle may report its hit again a few ulps further on).
+fn crossings(accel: &Accel<'_>, p: Vec3, dir: Vec3) -> usize {
+    let mut ray = Ray {
+        origin: p,
+        dir,
+        t_min: 0.0,
+        t_max: f32::INFINITY,
+    };
+    let mut n = 0;
+    while let Some(h) = accel.intersect(&ray) {
+        n += 1;
+        ray.t_min = h.t * (1.0 + 8.0 * f32::EPSILON) + f32::MIN_POSITIVE;
+        assert!(n < 10_000, "runaway crossing count");
+    }
+    n
+}
+
+/// Points strictly inside a closed mesh: random points of its bounds whose
+/// crossing count is odd along three different directions.
+fn interior_points(accel: &Accel<'_>, t: &TriScene, rng: &mut Rng, want: usize) -> Vec<Vec3> {
+    let b = t.bounds;
+    let dirs = [
+        Vec3::new(0.31, 0.84, 0.44).normalize(),
+        Vec3::new(-0.72, 0.11, 0.68).normalize(),
+        Vec3::new(0.05, -0.93, 0.36).normalize(),
+    ];
+    let mut out = Vec::new();
+    for _ in 0..20_000 {
+        let p = b.min
+            + (b.max - b.min)
+                * Vec3::new(
+                    rng.rangef(0.02, 0.98),
+                    rng.rangef(0.02, 0.98),
+                    rng.rangef(0.02, 0.98),
+                );
+        if dirs.iter().all(|&d| crossings(accel, p, d) % 2 == 1) {
+            out.push(p);
+            if out.len() == want {
+                break;
+            }
+        }
+    }
+    out
+}
+
+/// A ray from a point inside a closed mesh toward any point of its
+/// surface reaches the surface at or before that point: aimed exactly at
+/// vertices and along edges, where two or more triangles meet, it must
+/// still hit (pbrt-v4's Triangle.Watertight, from inside real meshes too).
+#[test]
+fn watertight_rays_at_vertices_and_edges_never_miss() {
+    let meshes = closed_meshes();
+    assert!(meshes.len() >= 10, "{} closed meshes", meshes.len());
+    let mut rng = Rng(99);
+    let mut total = 0usize;
+    let per_mesh = 1_000_000 / meshes.len() + 1;
+    for (m, t) in meshes.iter().enumerate() {
+        let accel = Accel::new(t, AccelOptions::default());
+        let inside = interior_points(&accel, t, &mut rng, 16);
+        assert!(!inside.is_empty(), "mesh {m}: no interior point found");
+        let mut misses = 0usize;
+        for k in 0..per_mesh {
+            // Aim at a vertex (1/3 of the rays) or a point on an edge.
+            let tri = t.triangle(rng.below(t.len() as u64) as u32);
+            let e = rng.below(3) as usize;
+            let target = if k % 3 == 0 {
+                tri[e]
+            } else {
+                let s = rng.rangef(0.0, 1.0);
+                tri[e] + (tri[(e + 1) % 3] - tri[e]) * s
+            };
+            let o = inside[k % inside.len()];
+            let Some(dir) = (target - o).try_normalize() else {
+                continue;
+            };
+            let ray = Ray {
+                origin: o,
+                dir,
+                t_min: 0.0,
+                t_max: f32::INFINITY,
+            };
+            if accel.intersect(&ray).is_none() {
+                misses += 1;
+            }
+            total += 1;
+        }
+        assert_eq!(
+            misses, 0,
+            "mesh {m}: {misses} of {per_mesh} rays slipped through"
+        );
+    }
+    assert!(total >= 1_000_000, "{total} rays");
+}
+
+#[test]
+fn rays_from_inside_a_closed_mesh_always_hit() {
+    let job = load("superellipsoids", &Overrides::default());
+    let mut rng = Rng(5);
+    let accel = Accel::new(&job.tri, AccelOptions::default());
+    for o in job
+        .tri
+        .objects
+        .iter()
+        .filter(|o| o.kind == "superellipsoid")
+    {
+        // The centre of a superellipsoid is inside it (star-shaped).
+        let c = o.bounds.center();
+        assert!(
+            accel.contains(job.tri.tri_object[o.tris.start as usize], c),
+            "{}: centre not inside",
+            o.label
+        );
+        for _ in 0..50_000 {
+            let ray = Ray {
+                origin: c,
+                dir: random_dir(&mut rng),
+                t_min: 0.0,
+                t_max: f32::INFINITY,
+            };
+            assert!(
+                accel.intersect(&ray).is_some(),
+                "{}: a ray from inside escaped",
+                o.label
+            );
+        }
+    }
+}
+
+/// The visible surfaces do not change with the scale and position of a
+/// scene: the id image of every scaled and moved copy equals the original
+/// one except at ties (edge ties widened by the f32 rounding of the moved
+/// vertices, which really moves them).
+#[test]
+fn visibility_is_the_same_at_any_scale() {
+    for name in ["spheres", "glass", "inside"] {
+        let base_scene = Scene::load(&scene_path(name)).unwrap();
+        let base = Prepared::from_scene(base_scene.clone(), &Overrides::default()).unwrap();
+        let fb = base.render(Backend::Ray).frame;
+        for (scale, offset) in [
+            (1e-3, DVec3::ZERO),
+            (1e5, DVec3::ZERO),
+            (1.0, DVec3::new(1e4, -1e4, 1e4)),
+            (1e3, DVec3::new(1e4, 0.0, -1e4)),
+        ] {
+            let job = Prepared::from_scene(base_scene.scaled(scale, offset), &Overrides::default())
+                .unwrap();
+            assert_eq!(
+                job.tri.len(),
+                base.tri.len(),
+                "{name} ×{scale} +{offset}: tessellation changed"
+            );
+            let f = job.render(Backend::Ray).frame;
+            // Visibility: every differing id is explained (no real mismatch)
+            // by the oracle of the scaled scene.
+            let tol = derive_tolerances(&job.tri);
+            let cam = &job.tri.camera;
+            // Across scenes the triangles differ by the f32 rounding of the
+            // scaled and moved vertices (≤ ½ ulp of the largest coordinate);
+            // the base frame's triangle is evaluated in the scaled scene, so
+            // that rounding, in pixels at the nearest depth, widens the edge band.
+            let b = job.tri.bounds;
+            let largest = f64::from(b.min.abs().max(b.max.abs()).max_element());
+            let ulp = largest * f64::from(f32::EPSILON);
+            let z_min = b
+                .corners()
+                .iter()
+                .map(|c| cam.view_depth(to_f64(*c)))
+                .fold(f64::INFINITY, f64::min)
+                .max(cam.near());
+            let quantization_px = ulp * cam.max_pixels_per_unit(z_min);
+            let oracle = Oracle::new(
+                &job.tri,
+                tol.edge_px + quantization_px,
+                tol.near_eps,
+                DepthFormat::F32,
+            );
+            let mut real = 0;
+            let mut differ = 0;
+            for (i, (&a, &b)) in fb.id.iter().zip(&f.id).enumerate() {
+                if a != b {
+                    differ += 1;
+                    let (sx, sy) = (
+                        (i as u32) % cam.sample_width(),
+                        (i as u32) / cam.sample_width(),
+                    );
+                    let (x, y) = cam.sample_point(sx, sy);
+                    let opt = |v: u32| (v != BACKGROUND).then_some(v);
+                    if oracle.classify(x, y, opt(a), opt(b)) == Class::Real {
+                        real += 1;
+                    }
+                }
+            }
+            assert_eq!(
+                real, 0,
+                "{name} ×{scale} +{offset}: {real} of {differ} differing samples are real"
+            );
+        }
+    }
+}
+
+#[test]
+fn output_does_not_depend_on_the_thread_count() {
+    for name in ["spheres", "glass", "dense"] {
+        let job = load(name, &Overrides::default());
+        for backend in [Backend::Ray, Backend::Raster] {
+            let one = with_threads(1, || job.render(backend).frame);
+            for n in [2, 8] {
+                let other = with_threads(n, || job.render(backend).frame);
+                assert!(
+                    one == other,
+                    "{name} {backend}: 1 thread and {n} threads differ"
+                );
+            }
+        }
+    }
+}
+
+// ---- Shading against an independent f64 reference ------------------------
+
+struct Finish {
+    pigment: [f64; 3],
+    ambient: f64,
+    diffuse: f64,
+    brilliance: f64,
+    phong: f64,
+    phong_size: f64,
+    specular: f64,
+    roughness: f64,
+    metallic: f64,
+    reflection: f64,
+    filter: f64,
+    transmit: f64,
+    emission: f64,
+}
+
+const BASE: Finish = Finish {
+    pigment: [0.8, 0.5, 0.3],
+    ambient: 0.1,
+    diffuse: 0.6,
+    brilliance: 1.0,
+    phong: 0.0,
+    phong_size: 40.0,
+    specular: 0.0,
+    roughness: 0.05,
+    metallic: 0.0,
+    reflection: 0.0,
+    filter: 0.0,
+    transmit: 0.0,
+    emission: 0.0,
+};
+
+/// POVRAY.md §4 in f64, for one analytic sphere lit by one point light,
+/// seen against a uniform background (reflected and transmitted rays of a
+/// convex sphere leave it and see the background; an ior-1 transmitted ray
+/// crosses the far side, which is shaded too).
+fn reference(
+    f: &Finish,
+    p: DVec3,
+    n_out: DVec3,
+    d: DVec3,
+    light: DVec3,
+    lc: f64,
+    amb: f64,
+    bg: [f64; 3],
+    far: Option<(DVec3, DVec3)>,
+) -> [f64; 3] {
+    let tw: [f64; 3] = std::array::from_fn(|k| f.filter * f.pigment[k] + f.transmit);
+    let local = |p: DVec3, n_out: DVec3, d: DVec3| -> [f64; 3] {
+        let n = if n_out.dot(d) > 0.0 { -n_out } else { n_out };
+        let l = (light - p).normalize();
+        let nl = n.dot(l);
+        let opacity = 1.0 - f.filter - f.transmit;
+        // A shadow ray that re-enters the (transparent) sphere crosses its
+        // surface once more: the light is filtered by f·P + t.
+        let shadow: [f64; 3] = if n_out.dot(l) < 0.0 { tw } else { [1.0; 3] };
+        let mut c = [0.0; 3];
+        let mut hl = 0.0;
+        let mut metal = [1.0; 3];
+        if nl > 0.0 {
+            let x = nl.clamp(-1.0, 1.0).acos() / std::f64::consts::FRAC_PI_2;
+            let fr = (0.014_567_225 / (x - 1.12).powi(2) - 0.011_612_903).clamp(0.0, 1.0);
+            for k in 0..3 {
+                metal[k] = 1.0 + f.metallic * (1.0 - fr) * (f.pigment[k] - 1.0);
+            }
+            let rv = d - n * (2.0 * d.dot(n));
+            if f.phong > 0.0 && rv.dot(l) > 0.0 {
+                hl += f.phong * rv.dot(l).powf(f.phong_size);
+            }
+            let h = (l - d).normalize();
+            if f.specular > 0.0 && h.dot(n) > 0.0 {
+                hl += f.specular * h.dot(n).powf(1.0 / f.roughness);
+            }
+        }
+        for k in 0..3 {
+            let lk = lc * shadow[k];
+            let diffuse = if nl > 0.0 {
+                f.diffuse * nl.powf(f.brilliance) * lk
+            } else {
+                0.0
+            };
+            c[k] = opacity * f.pigment[k] * (f.ambient * amb + f.emission + diffuse)
+                + hl * lk * metal[k];
+        }
+        c
+    };
+    let mut c = local(p, n_out, d);
+    for k in 0..3 {
+        c[k] += f.reflection * bg[k];
+    }
+    if f.filter + f.transmit > 0.0 {
+        // ior 1: straight on, through the far side (shaded too), then the background.
+        let (p2, n2) = far.expect("a far-side hit");
+        let c2 = local(p2, n2, d);
+        for k in 0..3 {
+            c[k] += tw[k] * (c2[k] + f.reflection * bg[k] + tw[k] * bg[k]);
+        }
+    }
+    c
+}
+
+#[test]
+fn shading_matches_a_hand_computed_reference_for_each_finish_key() {
+    let bg = [0.2, 0.3, 0.4];
+    let light = DVec3::new(3.0, 4.0, 5.0);
+    let amb = 0.7;
+    let cases: Vec<(&str, Finish)> = vec![
+        (
+            "ambient",
+            Finish {
+                ambient: 0.4,
+                ..BASE
+            },
+        ),
+        (
+            "diffuse",
+            Finish {
+                diffuse: 0.9,
+                ..BASE
+            },
+        ),
+        (
+            "brilliance",
+            Finish {
+                brilliance: 3.0,
+                ..BASE
+            },
+        ),
+        ("phong", Finish { phong: 0.8, ..BASE }),
+        (
+            "phong_size",
+            Finish {
+                phong: 0.8,
+                phong_size: 7.0,
+                ..BASE
+            },
+        ),
+        (
+            "specular",
+            Finish {
+                specular: 0.7,
+                ..BASE
+            },
+        ),
+        (
+            "roughness",
+            Finish {
+                specular: 0.7,
+                roughness: 0.2,
+                ..BASE
+            },
+        ),
+        (
+            "metallic",
+            Finish {
+                phong: 0.9,
+                phong_size: 5.0,
+                metallic: 0.8,
+                ..BASE
+            },
+        ),
+        (
+            "reflection",
+            Finish {
+                reflection: 0.5,
+                ..BASE
+            },
+        ),
+        (
+            "filter",
+            Finish {
+                filter: 0.6,
+                phong: 0.5,
+                ..BASE
+            },
+        ),
+        (
+            "transmit",
+            Finish {
+                transmit: 0.4,
+                specular: 0.3,
+                ..BASE
+            },
+        ),
+        (
+            "emission",
+            Finish {
+                emission: 0.3,
+                ..BASE
+            },
+        ),
+    ];
+    for (key, f) in cases {
+        let text = format!(
+            r#"
+[image]
+width = 48
+height = 48
+background = [{}, {}, {}]
+[camera]
+eye = [0.0, 0.0, 4.0]
+look_at = [0.0, 0.0, 0.0]
+up = [0.0, 1.0, 0.0]
+fov_y = 40.0
+[render]
+ambient_light = [{amb}, {amb}, {amb}]
+max_depth = 3
+[[lights]]
+kind = "point"
+position = [{}, {}, {}]
+color = [1.0, 1.0, 1.0]
+[materials.m]
+pigment = [{}, {}, {}]
+ambient = {}
+diffuse = {}
+brilliance = {}
+phong = {}
+phong_size = {}
+specular = {}
+roughness = {}
+metallic = {}
+reflection = {}
+filter = {}
+transmit = {}
+emission = {}
+[ray]
+geometry = "analytic"
+[[objects]]
+kind = "sphere"
+material = "m"
+center = [0.0, 0.0, 0.0]
+radius = 1.0
+"#,
+            bg[0],
+            bg[1],
+            bg[2],
+            light.x,
+            light.y,
+            light.z,
+            f.pigment[0],
+            f.pigment[1],
+            f.pigment[2],
+            f.ambient,
+            f.diffuse,
+            f.brilliance,
+            f.phong,
+            f.phong_size,
+            f.specular,
+            f.roughness,
+            f.metallic,
+            f.reflection,
+            f.filter,
+            f.transmit,
+            f.emission
+        );
+        let scene = Scene::from_str(&scene_path("inline"), &text).unwrap();
+        let job = Prepared::from_scene(scene, &Overrides::default()).unwrap();
+        let frame = job.render(Backend::Ray).frame;
+        let cam = &job.tri.camera;
+        let mut checked = 0;
+        // Error bound: every input carries an f32 rounding (≤ 2^-24
+        // relative); the largest exponent here is 1/0.05 = 20 (40 for phong),
+        // and a chain of ~30 f32 operations adds 30·2^-24. So
+        // |Δ| ≤ (40·4 + 30)·2^-24·|C| ≤ 2e-5 for |C| ≤ 1.7.
+        let bound = 2e-5;
+        for sy in (2..48).step_by(5) {
+            for sx in (2..48).step_by(5) {
+                let i = (sy * 48 + sx) as usize;
+                if frame.id[i] == BACKGROUND {
+                    continue;
+                }
+                let (o, d) = cam.primary_ray_f64(f64::from(sx) + 0.5, f64::from(sy) + 0.5);
+                let (t0, t1) =
+                    rendiff::accel::sphere::sphere_roots(o, d, DVec3::ZERO, 1.0).unwrap();
+                let p = o + d * t0;
+                // The renderer shades with the f32 direction; so does the reference.
+                let d32 = to_f64(to_f32(d));
+                let p2 = o + d * t1;
+                let want = reference(
+                    &f,
+                    p,
+                    p.normalize(),
+                    d32,
+                    light,
+                    1.0,
+                    amb,
+                    bg,
+                    Some((p2, p2.normalize())),
+                );
+                let got = frame.sample_color[i];
+                let got = [f64::from(got.r), f64::from(got.g), f64::from(got.b)];
+                for k in 0..3 {
+                    assert!(
+                        (got[k] - want[k]).abs() <= bound,
+                        "{key}: sample ({sx}, {sy}) channel {k}: got {} want {} (Δ {:e})",
+                        got[k],
+                        want[k],
+                        got[k] - want[k]
+                    );
+                }
+                checked += 1;
+            }
+        }
+        assert!(checked > 30, "{key}: only {checked} samples on the sphere");
+    }
+}
+
+/// No acne at any scale: on a lone convex object, a shadow ray from a
+/// point whose geometric normal faces the light cannot be blocked (the ray
+/// leaves the convex hull), and a reflected ray cannot hit the object
+/// again. Both are checked on every sample, for the scene scaled from 1e-3
+/// to 1e5 and moved up to 1e4 away from the origin with everything in it.
+#[test]
+fn no_self_hits_at_any_scale() {
+    let text = |reflection: f64| {
+        format!(
+            r#"
+[image]
+width = 96
+height = 96
+background = [0.25, 0.5, 0.75]
+[camera]
+eye = [0.4, 0.7, 3.5]
+look_at = [0.0, 0.0, 0.0]
+up = [0.0, 1.0, 0.0]
+fov_y = 45.0
+[render]
+max_depth = 2
+tessellation_error = 1.5
+[[lights]]
+kind = "point"
+position = [2.0, 3.0, 2.5]
+color = [1.0, 1.0, 1.0]
+[[lights]]
+kind = "point"
+position = [-3.0, 0.5, 1.0]
+color = [0.5, 0.5, 0.5]
+[materials.m]
+pigment = [0.8, 0.7, 0.6]
+phong = 0.5
+reflection = {reflection}
+[[objects]]
+kind = "sphere"
+material = "m"
+center = [0.0, 0.0, 0.0]
+radius = 1.0
+"#
+        )
+    };
+    let base = Scene::from_str(&scene_path("inline"), &text(0.5)).unwrap();
+    let base0 = Scene::from_str(&scene_path("inline"), &text(0.0)).unwrap();
+    let mut checked = 0u64;
+    // Scaled about the origin from 1e-3 to 1e5, and moved 1e4 away at
+    // scales 1 and 1e3. (A scene 1e-3 across moved 1e4 away spans a few
+    // f32 ulps of its position: no geometry survives that rounding.)
+    for (scale, offset) in [
+        (1.0, DVec3::ZERO),
+        (1e-3, DVec3::ZERO),
+        (1e5, DVec3::ZERO),
+        (1.0, DVec3::new(1e4, -1e4, 1e4)),
+        (1e3, DVec3::new(-1e4, 1e4, 0.0)),
+    ] {
+        let job = Prepared::from_scene(base.scaled(scale, offset), &Overrides::default()).unwrap();
+        let job0 =
+            Prepared::from_scene(base0.scaled(scale, offset), &Overrides::default()).unwrap();
+        let (f, f0) = (
+            job.render(Backend::Ray).frame,
+            job0.render(Backend::Ray).frame,
+        );
+        let t = &job.tri;
+        let mut shadow_acne = 0;
+        let mut reflect_acne = 0;
+        for i in 0..f.id.len() {
+            let id = f.id[i];
+            if id == BACKGROUND {
+                continue;
+            }
+            assert_eq!(id, f0.id[i]);
+            let ng = t.geometric_normal(id);
+            let centroid = t.triangle(id).iter().copied().sum::<Vec3>() / 3.0;
+            for (k, l) in t.lights.iter().enumerate() {
+                let rendiff::shade::LightKind::Point { position } = l.kind else {
+                    continue;
+                };
+                let to_light = (position - centroid).normalize();
+                // Well inside the lit side of the facet's plane.
+                if ng.dot(to_light) > 0.05 && f.flags[i] & (2 << k) != 0 {
+                    shadow_acne += 1;
+                }
+            }
+            // Where the view meets the facet at less than 60° from its
+            // normal, the mirror ray about the smooth normal (within a few
+            // degrees of the facet's) leaves the facet's plane outward and
+            // cannot meet the convex object again: C(reflection 0.5) −
+            // C(reflection 0) = 0.5·background, up to the f32 rounding of the
+            // sum (≤ 2 ulps of values ≤ 2).
+            let cam = &t.camera;
+            let (sx, sy) = (
+                (i as u32) % cam.sample_width(),
+                (i as u32) / cam.sample_width(),
+            );
+            if cam.sample_ray(sx, sy).dir.dot(ng) > -0.5 {
+                continue;
+            }
+            let (c, c0) = (f.sample_color[i], f0.sample_color[i]);
+            let want = [0.125f32, 0.25, 0.375];
+            for (got, w) in [c.r - c0.r, c.g - c0.g, c.b - c0.b].iter().zip(want) {
+                if (got - w).abs() > 4.0 * f32::EPSILON * 2.0 {
+                    reflect_acne += 1;
+                }
+            }
+            checked += 1;
+        }
+        assert_eq!(shadow_acne, 0, "×{scale} +{offset}: shadow acne");
+        assert_eq!(
+            reflect_acne, 0,
+            "×{scale} +{offset}: reflection rays hit their own surface"
+        );
+    }
+    assert!(checked > 10_000, "{checked} samples");
+}
