@@ -2,6 +2,8 @@
 
 /// Bad input: every file of tests/data/bad gives exit 2 and a located message.
 mod bad_input;
+/// The rasterizer: exact coverage, drift, depth formats, near clipping.
+mod raster;
 /// The ray tracer: BVH, watertightness, self-hits, threads, shading.
 mod ray;
 /// Tessellation: chord error bounds and closedness.

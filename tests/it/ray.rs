@@ -5,7 +5,7 @@
 use rendiff::accel::{Accel, AccelOptions, ShadowRays};
 use rendiff::camera::{Camera, Projection};
 use rendiff::compare::{Class, Oracle, derive_tolerances};
-use rendiff::frame::{BACKGROUND, Frame};
+use rendiff::frame::BACKGROUND;
 use rendiff::math::{DVec3, Ray, Vec3, to_f32, to_f64};
 use rendiff::options::{DepthFormat, Geometry};
 use rendiff::scene::Scene;
@@ -425,6 +425,7 @@ const BASE: Finish = Finish {
 /// seen against a uniform background (reflected and transmitted rays of a
 /// convex sphere leave it and see the background; an ior-1 transmitted ray
 /// crosses the far side, which is shaded too).
+#[expect(clippy::too_many_arguments, reason = "the reference's scene, spelled out")]
 fn reference(
     f: &Finish,
     p: DVec3,
@@ -451,8 +452,8 @@ fn reference(
         if nl > 0.0 {
             let x = nl.clamp(-1.0, 1.0).acos() / std::f64::consts::FRAC_PI_2;
             let fr = (0.014_567_225 / (x - 1.12).powi(2) - 0.011_612_903).clamp(0.0, 1.0);
-            for k in 0..3 {
-                metal[k] = 1.0 + f.metallic * (1.0 - fr) * (f.pigment[k] - 1.0);
+            for (m, p) in metal.iter_mut().zip(f.pigment) {
+                *m = 1.0 + f.metallic * (1.0 - fr) * (p - 1.0);
             }
             let rv = d - n * (2.0 * d.dot(n));
             if f.phong > 0.0 && rv.dot(l) > 0.0 {

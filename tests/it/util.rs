@@ -2,8 +2,7 @@
 
 use std::path::{Path, PathBuf};
 
-use rendiff::frame::Frame;
-use rendiff::{Backend, Overrides, Prepared};
+use rendiff::{Overrides, Prepared};
 
 /// The crate root.
 pub fn root() -> &'static Path {
@@ -40,11 +39,6 @@ pub fn with_threads<T: Send>(n: usize, f: impl FnOnce() -> T + Send) -> T {
         .build()
         .expect("thread pool")
         .install(f)
-}
-
-/// Renders a prepared scene with a backend.
-pub fn render(job: &Prepared, b: Backend) -> Frame {
-    job.render(b).frame
 }
 
 /// A small deterministic generator (SplitMix64): tests print the seed they
