@@ -110,6 +110,17 @@ impl SampleGrid {
     }
 }
 
+/// Which edges own the samples exactly on them.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum FillRule {
+    /// D3D/GL: top and left edges (DESIGN.md §2).
+    #[default]
+    TopLeft,
+    /// The mirror rule: bottom and right edges. Only for the verdict's
+    /// negative control (it must produce edge ties and nothing else).
+    BottomRight,
+}
+
 /// One edge `E(x, y) = a·x + b·y + c` with the triangle's interior on the
 /// side `E ≥ bias` (`bias` 0 on a top or left edge, else 1).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -123,18 +134,22 @@ struct Edge {
 impl Edge {
     /// The edge from `p` to `q` of a triangle whose interior lies on its
     /// positive side.
-    fn new(p: (i64, i64), q: (i64, i64)) -> Edge {
+    fn new(p: (i64, i64), q: (i64, i64), rule: FillRule) -> Edge {
         let dx = q.0 - p.0;
         let dy = q.1 - p.1;
         // E(x, y) = dx·(y − p.y) − dy·(x − p.x): ∂E/∂x = −dy, ∂E/∂y = dx.
         // Top-left rule (y down): a left edge has the interior toward +x
         // (dy < 0); a top edge is horizontal with the interior below (dx > 0).
         let top_left = dy < 0 || (dy == 0 && dx > 0);
+        let owns = match rule {
+            FillRule::TopLeft => top_left,
+            FillRule::BottomRight => !top_left,
+        };
         Edge {
             a: -dy,
             b: dx,
             c: dy * p.0 - dx * p.1,
-            bias: i64::from(!top_left),
+            bias: i64::from(!owns),
         }
     }
 
@@ -169,6 +184,12 @@ impl SnappedTri {
     /// snapping or coordinates beyond [`MAX_SNAPPED`].
     #[must_use]
     pub fn new(p: [(f64, f64); 3]) -> Option<SnappedTri> {
+        Self::with_rule(p, FillRule::TopLeft)
+    }
+
+    /// As [`SnappedTri::new`] with a chosen fill rule.
+    #[must_use]
+    pub fn with_rule(p: [(f64, f64); 3], rule: FillRule) -> Option<SnappedTri> {
         if p.iter().any(|(x, y)| !x.is_finite() || !y.is_finite()) {
             return None;
         }
@@ -177,12 +198,12 @@ impl SnappedTri {
             return None;
         }
         let s = p.map(|(x, y)| (Sub8::snap(x).0, Sub8::snap(y).0));
-        Self::from_snapped(s)
+        Self::from_snapped(s, rule)
     }
 
     /// A triangle from already snapped coordinates.
     #[must_use]
-    pub fn from_snapped(s: [(i64, i64); 3]) -> Option<SnappedTri> {
+    pub fn from_snapped(s: [(i64, i64); 3], rule: FillRule) -> Option<SnappedTri> {
         let area2 = (s[1].0 - s[0].0) * (s[2].1 - s[0].1) - (s[2].0 - s[0].0) * (s[1].1 - s[0].1);
         if area2 == 0 {
             return None;
@@ -192,9 +213,9 @@ impl SnappedTri {
         let order = if area2 > 0 { [0, 1, 2] } else { [0, 2, 1] };
         let v = order.map(|i| s[i]);
         let edges = [
-            Edge::new(v[0], v[1]),
-            Edge::new(v[1], v[2]),
-            Edge::new(v[2], v[0]),
+            Edge::new(v[0], v[1], rule),
+            Edge::new(v[1], v[2], rule),
+            Edge::new(v[2], v[0], rule),
         ];
         Some(SnappedTri {
             x: v.map(|q| q.0),

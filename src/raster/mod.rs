@@ -32,7 +32,7 @@ use rayon::prelude::*;
 use crate::accel::{Accel, AccelOptions, ShadowRays};
 use crate::camera::Projection;
 use crate::color::Rgb;
-use crate::coverage::{SampleGrid, SnappedTri};
+use crate::coverage::{FillRule, SampleGrid, SnappedTri};
 use crate::frame::{BACKGROUND, Frame};
 use crate::math::{Bary, DVec3, to_f64};
 use crate::options::{DepthFormat, ShadowMode};
@@ -65,6 +65,8 @@ const GUARD_PX: f64 = 65_536.0;
 pub struct Perturb {
     /// Shift every projected vertex by this many pixels in x and y.
     pub offset_px: f64,
+    /// The fill rule (bottom-right flips the ownership of edge samples).
+    pub fill_rule: FillRule,
 }
 
 /// Options of the rasterizer.
@@ -109,15 +111,20 @@ struct Record {
     rows: (u32, u32),
     /// A back face (doubled signed area ≥ 0 before orientation).
     back: bool,
+    /// The fill rule in effect.
+    rule: FillRule,
 }
 
 impl Record {
     fn snapped(&self) -> Option<SnappedTri> {
-        SnappedTri::from_snapped([
-            (i64::from(self.x[0]), i64::from(self.y[0])),
-            (i64::from(self.x[1]), i64::from(self.y[1])),
-            (i64::from(self.x[2]), i64::from(self.y[2])),
-        ])
+        SnappedTri::from_snapped(
+            [
+                (i64::from(self.x[0]), i64::from(self.y[0])),
+                (i64::from(self.x[1]), i64::from(self.y[1])),
+                (i64::from(self.x[2]), i64::from(self.y[2])),
+            ],
+            self.rule,
+        )
     }
 }
 
@@ -261,6 +268,7 @@ pub fn visibility(scene: &TriScene, opts: &RasterOptions) -> VisibilityBuffers {
                 &hv,
                 c * chunk..((c + 1) * chunk).min(n_tris),
                 &grid,
+                opts.perturb.fill_rule,
                 |obj| {
                     (
                         opts.frustum_cull.get(obj).copied().unwrap_or(false),
@@ -356,13 +364,12 @@ fn setup_triangle(
     v: &[HVert; 3],
     tri: u32,
     cull_back: bool,
-    clip_planes: &[clip::Plane; 5],
-    grid: &SampleGrid,
-    (sw, sh): (u32, u32),
+    ctx: &SetupCtx<'_>,
     poly: &mut Vec<HVert>,
     tmp: &mut Vec<HVert>,
     out: &mut Vec<Record>,
 ) {
+    let (clip_planes, grid, (sw, sh)) = (&ctx.clip_planes, ctx.grid, ctx.size);
     let near = -clip_planes[0].c[4];
     if v.iter().all(|p| p.z < near) {
         return;
@@ -388,7 +395,8 @@ fn setup_triangle(
     }
     let screen: Vec<(f64, f64)> = poly.iter().map(HVert::screen).collect();
     for k in 1..screen.len() - 1 {
-        let Some(st) = SnappedTri::new([screen[0], screen[k], screen[k + 1]]) else {
+        let Some(st) = SnappedTri::with_rule([screen[0], screen[k], screen[k + 1]], ctx.rule)
+        else {
             continue;
         };
         if cull_back && st.is_back_facing() {
@@ -409,6 +417,7 @@ fn setup_triangle(
             tri,
             rows: (rows.start, rows.end),
             back: st.is_back_facing(),
+            rule: ctx.rule,
         });
     }
 }
@@ -566,6 +575,15 @@ fn scan_record(
     (writes, frags)
 }
 
+/// What triangle setup needs besides the triangle.
+struct SetupCtx<'g> {
+    clip_planes: [clip::Plane; 5],
+    grid: &'g SampleGrid,
+    /// Sample grid size.
+    size: (u32, u32),
+    rule: FillRule,
+}
+
 /// The records of the triangles in `range`, in id order; `cull(object)`
 /// says whether to skip the object (frustum) and whether to cull its back
 /// faces.
@@ -574,16 +592,21 @@ fn records(
     hv: &[HVert],
     range: std::ops::Range<usize>,
     grid: &SampleGrid,
+    rule: FillRule,
     cull: impl Fn(usize) -> (bool, bool),
 ) -> Vec<Record> {
     let cam = &scene.camera;
-    let clip_planes = planes(
-        cam.near(),
-        f64::from(cam.width()),
-        f64::from(cam.height()),
-        GUARD_PX,
-    );
-    let (sw, sh) = (cam.sample_width(), cam.sample_height());
+    let ctx = SetupCtx {
+        clip_planes: planes(
+            cam.near(),
+            f64::from(cam.width()),
+            f64::from(cam.height()),
+            GUARD_PX,
+        ),
+        grid,
+        size: (cam.sample_width(), cam.sample_height()),
+        rule,
+    };
     let mut out = Vec::new();
     let mut poly = Vec::with_capacity(8);
     let mut tmp = Vec::with_capacity(8);
@@ -594,17 +617,7 @@ fn records(
         }
         let v = scene.tris[t].map(|i| hv[i as usize]);
         let tri = u32::try_from(t).unwrap_or(u32::MAX);
-        setup_triangle(
-            &v,
-            tri,
-            cull_back,
-            &clip_planes,
-            grid,
-            (sw, sh),
-            &mut poly,
-            &mut tmp,
-            &mut out,
-        );
+        setup_triangle(&v, tri, cull_back, &ctx, &mut poly, &mut tmp, &mut out);
     }
     out
 }
@@ -617,7 +630,7 @@ pub fn cover(scene: &TriScene, backface_cull: bool, mut visit: impl FnMut(u32, u
     let cam = &scene.camera;
     let grid = SampleGrid::new(cam.samples());
     let hv = homogeneous(scene, Perturb::default());
-    for r in records(scene, &hv, 0..scene.len(), &grid, |_| {
+    for r in records(scene, &hv, 0..scene.len(), &grid, FillRule::TopLeft, |_| {
         (false, backface_cull)
     }) {
         let Some(st) = r.snapped() else { continue };
@@ -658,7 +671,9 @@ pub fn measure_drift(scene: &TriScene) -> Drift {
     let perspective = matches!(cam.projection(), Projection::Perspective { .. });
     let n = f64::from(grid.n);
     let mut drift = Drift::default();
-    for r in records(scene, &hv, 0..scene.len(), &grid, |_| (false, false)) {
+    for r in records(scene, &hv, 0..scene.len(), &grid, FillRule::TopLeft, |_| {
+        (false, false)
+    }) {
         let mut span_len = 0u32;
         let mut last_row = u32::MAX;
         walk_record(

@@ -2,6 +2,10 @@
 
 /// Bad input: every file of tests/data/bad gives exit 2 and a located message.
 mod bad_input;
+/// Raster against ray on every scene, and the classifier's negative controls.
+mod differential;
+/// Regression images per backend (golden/raster, golden/ray).
+mod golden;
 /// The rasterizer: exact coverage, drift, depth formats, near clipping.
 mod raster;
 /// The ray tracer: BVH, watertightness, self-hits, threads, shading.

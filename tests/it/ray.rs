@@ -425,7 +425,10 @@ const BASE: Finish = Finish {
 /// seen against a uniform background (reflected and transmitted rays of a
 /// convex sphere leave it and see the background; an ior-1 transmitted ray
 /// crosses the far side, which is shaded too).
-#[expect(clippy::too_many_arguments, reason = "the reference's scene, spelled out")]
+#[expect(
+    clippy::too_many_arguments,
+    reason = "the reference's scene, spelled out"
+)]
 fn reference(
     f: &Finish,
     p: DVec3,
