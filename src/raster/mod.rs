@@ -356,10 +356,6 @@ pub fn visibility(scene: &TriScene, opts: &RasterOptions) -> VisibilityBuffers {
     }
 }
 
-#[expect(
-    clippy::too_many_arguments,
-    reason = "the inner loop's state, passed once per triangle"
-)]
 fn setup_triangle(
     v: &[HVert; 3],
     tri: u32,
