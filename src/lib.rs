@@ -139,9 +139,7 @@ pub enum Error {
     Usage(String),
 }
 
-/// Half-width of the band around a shading discontinuity that the verdict
-/// treats as a tie (ε_g, DESIGN.md §6; derived in ARCHITECTURE.md).
-pub const GATE_EPS: f32 = 1e-4;
+pub use shade::GATE_EPS;
 
 /// A scene loaded, tessellated and planned: ready to render with any backend.
 #[derive(Debug)]

@@ -288,6 +288,20 @@ pub fn offset_origin(p: Vec3, p_error: Vec3, ng: Vec3, dir: Vec3) -> Vec3 {
     )
 }
 
+/// Half-width of the band around a shading discontinuity that the verdict
+/// treats as a tie (ε_g, DESIGN.md §6).
+///
+/// Both backends reach the same barycentrics to ~1e-12 and round them to
+/// f32 once, so their weights differ by at most one ulp (2⁻²⁴ absolute);
+/// the interpolated normal then moves by ≤ 2·2⁻²⁴ per unit of normal
+/// spread (≤ 2), and N·L, N·D by ≤ 2⁻²¹ plus ~10 f32 operations of
+/// rounding (10·2⁻²⁴): about 1.1e-6. The light vector moves with the hit
+/// point by |ΔP|/distance ≤ 2⁻²³ for lights farther than the triangle's
+/// size. ε_g = 1e-4 is 90× that bound: the margin covers a bump map's
+/// normal perturbation, whose height samples move with the uv by the
+/// same one ulp but are multiplied by the map's size and resolution.
+pub const GATE_EPS: f32 = 1e-4;
+
 /// Bit 0 of the shading flags: the sample lies on a discontinuity.
 pub const FLAG_DISCONTINUITY: u32 = 1;
 

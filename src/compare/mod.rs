@@ -141,7 +141,7 @@ fn sample_error(a: Rgb, b: Rgb) -> f32 {
 ///   origin and vertices), in pixels at the nearest view depth of the bounds.
 /// * δ_near = γ(16)·(|eye|∞ + |bounds|∞ + near): the absolute error of the
 ///   ray parameter near the eye.
-/// * ε_g = [`crate::GATE_EPS`].
+/// * ε_g = [`crate::shade::GATE_EPS`].
 /// * shading_max = 2⁻²² · K + 2⁻¹⁸, with K a bound on |∂C/∂b| (see
 ///   [`shading_lipschitz`]) and 2⁻¹⁸ the rounding of the shading arithmetic.
 #[must_use]
@@ -176,7 +176,7 @@ pub fn derive_tolerances(scene: &TriScene) -> Tolerances {
     Tolerances {
         edge_px: crate::coverage::SNAP_BOUND_PX + proj,
         near_eps: g * (eye + extent + cam.near()),
-        gate_eps: f64::from(crate::GATE_EPS),
+        gate_eps: f64::from(crate::shade::GATE_EPS),
         shading_max: (-22f64).exp2() * shading_lipschitz(scene) + (-18f64).exp2(),
     }
 }

@@ -233,7 +233,7 @@ impl<'a> Oracle<'a> {
             return 0.0;
         };
         let snap = crate::coverage::SNAP_BOUND_PX;
-        let drift = crate::raster::DEPTH_DRIFT_REL * t.abs();
+        let drift = crate::coverage::DEPTH_DRIFT_REL * t.abs();
         let ray = f64::from(crate::math::gamma(16)) * t.abs();
         self.format_resolution(t, z) + f.t_gradient * snap + drift + ray
     }

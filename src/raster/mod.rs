@@ -40,18 +40,7 @@ use crate::shade::{self, ShadeContext, Unoccluded, Visibility};
 use crate::tri_scene::TriScene;
 use clip::{HVert, clip_polygon, planes};
 
-/// Bound on the relative error of a depth-plane value stepped along a span
-/// (in `f64`) against its direct evaluation.
-///
-/// A span has at most k = 16384·16 = 2¹⁸ samples. Anchored at the span's
-/// start (error ≤ 3ε·max|v|, ε = 2⁻⁵³) and stepped k times by a constant
-/// (each add ≤ ε·max|v|, the step itself ≤ ε relative), the value is off by
-/// at most (2k + 3)·ε·max|v|. Over a span the depth plane 1/z (or z)
-/// changes by at most a factor 2¹⁰ for the scenes we accept (near ≥ 10⁻⁹ of
-/// the scene's extent would be needed to exceed it within one span), so the
-/// relative error is below (2¹⁹ + 3)·2⁻⁵³·2¹⁰ < 2⁻²³. The drift test checks
-/// the measured error against this bound on 16384-pixel spans.
-pub const DEPTH_DRIFT_REL: f64 = 1.0 / 8_388_608.0;
+pub use crate::coverage::DEPTH_DRIFT_REL;
 
 /// Sample rows per band.
 const BAND: u32 = 32;

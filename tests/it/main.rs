@@ -1,5 +1,7 @@
 //! Integration tests (one binary). Each module says what it covers.
 
+/// The module map's one-way dependencies.
+mod architecture;
 /// Bad input: every file of tests/data/bad gives exit 2 and a located message.
 mod bad_input;
 /// Raster against ray on every scene, and the classifier's negative controls.
