@@ -41,7 +41,11 @@ impl Sub8 {
         reason = "callers keep |x| within the guard band (≤ 2^20 px), far inside i64"
     )]
     pub fn snap(x: f64) -> Sub8 {
-        Sub8((x * 256.0).round() as i64)
+        // Round to nearest, ties to even, without a libm call: adding and
+        // subtracting 1.5·2⁵² leaves the integer part (exact for |v| < 2⁵¹).
+        const MAGIC: f64 = 6_755_399_441_055_744.0;
+        let v = x * 256.0;
+        Sub8(((v + MAGIC) - MAGIC) as i64)
     }
 
     /// The value in pixels.
@@ -64,6 +68,10 @@ impl Sub8 {
 /// relative error is below (2¹⁹ + 3)·2⁻⁵³·2¹⁰ < 2⁻²³. The drift test checks
 /// the measured error against this bound on 16384-pixel spans.
 pub const DEPTH_DRIFT_REL: f64 = 1.0 / 8_388_608.0;
+
+/// Bounding boxes with at most this many samples are scanned by point
+/// tests instead of the DDA (same coverage; cheaper for tiny triangles).
+const SMALL_TRIANGLE_SAMPLES: usize = 16;
 
 /// Largest distance (pixels) between a vertex and its snapped position:
 /// half a sub-pixel on each axis, √2·2⁻⁹.
@@ -112,14 +120,17 @@ impl SampleGrid {
 
     /// Smallest sample index with position ≥ `v`.
     #[must_use]
+    #[inline]
     pub fn first_at_or_after(&self, v: i64) -> i64 {
-        (v - self.first + self.step - 1).div_euclid(self.step)
+        // Floor division by the power of two `step`: an arithmetic shift.
+        (v - self.first + self.step - 1) >> self.shift
     }
 
     /// Largest sample index with position ≤ `v`.
     #[must_use]
+    #[inline]
     pub fn last_at_or_before(&self, v: i64) -> i64 {
-        (v - self.first).div_euclid(self.step)
+        (v - self.first) >> self.shift
     }
 }
 
@@ -309,6 +320,67 @@ impl SnappedTri {
         if rows.is_empty() || cols.is_empty() {
             return;
         }
+        let bbox_cols = self.sample_cols(grid, cols.clone());
+        if bbox_cols.is_empty() {
+            return;
+        }
+        if rows.len() * bbox_cols.len() <= SMALL_TRIANGLE_SAMPLES {
+            self.spans_by_point_tests(grid, rows, bbox_cols, span);
+            return;
+        }
+        self.spans_by_dda(grid, rows, cols, &mut span);
+    }
+
+    /// The spans of a small triangle by the exact point test at every
+    /// sample of its bounding box (the same rule as the DDA, cheaper than
+    /// its three divisions when the box holds a few samples).
+    fn spans_by_point_tests(
+        &self,
+        grid: &SampleGrid,
+        rows: Range<u32>,
+        cols: Range<u32>,
+        mut span: impl FnMut(u32, Range<u32>),
+    ) {
+        let x0 = grid.pos(i64::from(cols.start));
+        let step = [
+            self.edges[0].a * grid.step,
+            self.edges[1].a * grid.step,
+            self.edges[2].a * grid.step,
+        ];
+        for row in rows {
+            let y = grid.pos(i64::from(row));
+            let mut e = [0i64; 3];
+            for (k, ed) in self.edges.iter().enumerate() {
+                e[k] = ed.eval(x0, y) - ed.bias;
+            }
+            let (mut first, mut last) = (u32::MAX, 0u32);
+            for col in cols.clone() {
+                if e[0] >= 0 && e[1] >= 0 && e[2] >= 0 {
+                    first = first.min(col);
+                    last = col;
+                }
+                e[0] += step[0];
+                e[1] += step[1];
+                e[2] += step[2];
+            }
+            if first != u32::MAX {
+                span(row, first..last + 1);
+            }
+        }
+    }
+
+    /// The spans by the exact integer DDA alone (see [`SnappedTri::for_each_span`]).
+    pub fn spans_by_dda(
+        &self,
+        grid: &SampleGrid,
+        rows: Range<u32>,
+        cols: Range<u32>,
+        span: &mut impl FnMut(u32, Range<u32>),
+    ) {
+        let rows = self.sample_rows(grid, rows);
+        if rows.is_empty() || cols.is_empty() {
+            return;
+        }
         let y0 = grid.pos(i64::from(rows.start));
         let dy = grid.step;
         // Per edge: the bound on s for row y is derived from
@@ -418,6 +490,43 @@ impl Dda {
     }
 }
 
+/// Doubled signed area of snapped vertices in y-down screen coordinates
+/// (≥ 0 is a back face, DESIGN.md §7).
+#[must_use]
+pub fn doubled_area(s: &[(i64, i64); 3]) -> i64 {
+    (s[1].0 - s[0].0) * (s[2].1 - s[0].1) - (s[2].0 - s[0].0) * (s[1].1 - s[0].1)
+}
+
+/// The sample rows and columns inside the bounding box of snapped
+/// vertices, clipped to the sample grid `size`.
+#[must_use]
+pub fn bbox_samples(
+    s: &[(i64, i64); 3],
+    grid: &SampleGrid,
+    size: (u32, u32),
+) -> (Range<u32>, Range<u32>) {
+    let (xmin, xmax) = (
+        s[0].0.min(s[1].0).min(s[2].0),
+        s[0].0.max(s[1].0).max(s[2].0),
+    );
+    let (ymin, ymax) = (
+        s[0].1.min(s[1].1).min(s[2].1),
+        s[0].1.max(s[1].1).max(s[2].1),
+    );
+    (
+        clip_range(
+            grid.first_at_or_after(ymin),
+            grid.last_at_or_before(ymax),
+            &(0..size.1),
+        ),
+        clip_range(
+            grid.first_at_or_after(xmin),
+            grid.last_at_or_before(xmax),
+            &(0..size.0),
+        ),
+    )
+}
+
 fn clip_range(lo: i64, hi: i64, within: &Range<u32>) -> Range<u32> {
     let lo = lo.max(i64::from(within.start));
     let hi = hi.min(i64::from(within.end) - 1);
@@ -459,6 +568,16 @@ mod tests {
             }
         });
         v.sort_by_key(|&(x, y)| (y, x));
+        // The DDA alone gives the same samples (small triangles take the
+        // point-test path in for_each_span).
+        let mut d = Vec::new();
+        t.spans_by_dda(g, 0..h, 0..w, &mut |row, cols: Range<u32>| {
+            for c in cols {
+                d.push((c, row));
+            }
+        });
+        d.sort_by_key(|&(x, y)| (y, x));
+        assert_eq!(v, d, "DDA and point tests differ");
         v
     }
 

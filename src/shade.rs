@@ -468,7 +468,12 @@ pub fn shade(ctx: &ShadeContext<'_>, sp: &SurfacePoint, d: Vec3, vis: &dyn Visib
             }
             lc *= tr;
         }
-        diffuse_sum += pig * lc * (m.diffuse * n_dot_l.powf(m.brilliance));
+        let lambert = if m.brilliance == 1.0 {
+            n_dot_l
+        } else {
+            n_dot_l.powf(m.brilliance)
+        };
+        diffuse_sum += pig * lc * (m.diffuse * lambert);
         if light.shadowless {
             continue;
         }

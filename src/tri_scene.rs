@@ -140,6 +140,124 @@ impl TriScene {
         }
     }
 
+    /// The same scene with every triangle split into four at its edge
+    /// midpoints, `levels` times (4^levels as many triangles, the same
+    /// surface): for scaling benchmarks. Normals and uvs are interpolated;
+    /// objects keep their closedness (midpoints are shared between the two
+    /// triangles of an edge).
+    #[must_use]
+    pub fn subdivided(&self, levels: u32) -> TriScene {
+        let mut s = self.clone();
+        for _ in 0..levels {
+            s = s.subdivide_once();
+        }
+        s.order_vertices_by_first_use();
+        s
+    }
+
+    /// Renumbers the position pool in the order the triangles first use
+    /// each vertex, so walking the triangles walks the pool almost
+    /// sequentially (a per-vertex array then stays in cache); unused
+    /// positions are dropped.
+    pub fn order_vertices_by_first_use(&mut self) {
+        fn reorder<T: Copy>(pool: &mut Vec<T>, corners: &mut [[u32; 3]]) {
+            let mut remap = vec![NO_INDEX; pool.len()];
+            let mut out = Vec::with_capacity(pool.len());
+            for v in corners.iter_mut().flatten().filter(|v| **v != NO_INDEX) {
+                let slot = &mut remap[*v as usize];
+                if *slot == NO_INDEX {
+                    *slot = u32::try_from(out.len()).unwrap_or(NO_INDEX);
+                    out.push(pool[*v as usize]);
+                }
+                *v = *slot;
+            }
+            *pool = out;
+        }
+        reorder(&mut self.positions, &mut self.tris);
+        reorder(&mut self.normals, &mut self.tri_normals);
+        reorder(&mut self.uvs, &mut self.tri_uvs);
+    }
+
+    fn subdivide_once(&self) -> TriScene {
+        use std::collections::HashMap;
+        let mut out = self.clone();
+        out.tris.clear();
+        out.tri_normals.clear();
+        out.tri_uvs.clear();
+        out.tri_material.clear();
+        out.tri_object.clear();
+        let mut mids: HashMap<(u32, u32), u32> = HashMap::new();
+        let mut mid = |pool: &mut Vec<Vec3>, a: u32, b: u32| {
+            *mids.entry((a.min(b), a.max(b))).or_insert_with(|| {
+                let m = (pool[a as usize] + pool[b as usize]) * 0.5;
+                pool.push(m);
+                u32::try_from(pool.len() - 1).unwrap_or(u32::MAX)
+            })
+        };
+        let push_attr = |pool: &mut Vec<Vec3>, a: u32, b: u32| {
+            let m = (pool[a as usize] + pool[b as usize]).normalize_or_zero();
+            pool.push(m);
+            u32::try_from(pool.len() - 1).unwrap_or(u32::MAX)
+        };
+        for (k, t) in self.tris.iter().enumerate() {
+            let [a, b, c] = *t;
+            let (ab, bc, ca) = (
+                mid(&mut out.positions, a, b),
+                mid(&mut out.positions, b, c),
+                mid(&mut out.positions, c, a),
+            );
+            let n = self.tri_normals[k];
+            let nn = if n[0] == NO_INDEX {
+                [[NO_INDEX; 3]; 4]
+            } else {
+                let (nab, nbc, nca) = (
+                    push_attr(&mut out.normals, n[0], n[1]),
+                    push_attr(&mut out.normals, n[1], n[2]),
+                    push_attr(&mut out.normals, n[2], n[0]),
+                );
+                [
+                    [n[0], nab, nca],
+                    [nab, n[1], nbc],
+                    [nca, nbc, n[2]],
+                    [nab, nbc, nca],
+                ]
+            };
+            let u = self.tri_uvs[k];
+            let uu = if u[0] == NO_INDEX {
+                [[NO_INDEX; 3]; 4]
+            } else {
+                let mut push_uv = |a: u32, b: u32| {
+                    let m = (out.uvs[a as usize] + out.uvs[b as usize]) * 0.5;
+                    out.uvs.push(m);
+                    u32::try_from(out.uvs.len() - 1).unwrap_or(u32::MAX)
+                };
+                let (uab, ubc, uca) = (
+                    push_uv(u[0], u[1]),
+                    push_uv(u[1], u[2]),
+                    push_uv(u[2], u[0]),
+                );
+                [
+                    [u[0], uab, uca],
+                    [uab, u[1], ubc],
+                    [uca, ubc, u[2]],
+                    [uab, ubc, uca],
+                ]
+            };
+            let pt = [[a, ab, ca], [ab, b, bc], [ca, bc, c], [ab, bc, ca]];
+            for q in 0..4 {
+                out.tris.push(pt[q]);
+                out.tri_normals.push(nn[q]);
+                out.tri_uvs.push(uu[q]);
+                out.tri_material.push(self.tri_material[k]);
+                out.tri_object.push(self.tri_object[k]);
+            }
+        }
+        for o in &mut out.objects {
+            o.tris = o.tris.start * 4..o.tris.end * 4;
+        }
+        out
+    }
+
     /// Number of triangles.
     #[must_use]
     pub fn len(&self) -> usize {
@@ -172,10 +290,16 @@ impl TriScene {
 
     /// Unit geometric normal `(v1 − v0) × (v2 − v0)` (zero for a degenerate triangle).
     #[must_use]
+    #[inline]
     pub fn geometric_normal(&self, tri: u32) -> Vec3 {
         let [a, b, c] = self.triangle(tri);
-        let n = to_f64(b - a).cross(to_f64(c - a));
-        to_f32(n.normalize_or_zero())
+        let n = (b - a).cross(c - a);
+        if n.is_finite() {
+            n.normalize_or_zero()
+        } else {
+            // Edges so long their products overflow f32: take it in f64.
+            to_f32(to_f64(b - a).cross(to_f64(c - a)).normalize_or_zero())
+        }
     }
 
     /// Shading inputs of triangle `tri` at barycentric weights `b`.

@@ -87,9 +87,52 @@ pub struct BvhHit {
     pub b: [f32; 3],
 }
 
-struct Prim {
-    bounds: Aabb,
-    centroid: Vec3,
+/// A primitive reference for the build: its box as two SSE vectors, the
+/// reference index kept in the `w` lane of `lo` (32 bytes, moved in place
+/// by the partitions, so the build streams through memory).
+#[derive(Clone, Copy, Debug)]
+struct PrimRef {
+    lo: Vec4,
+    hi: Vec4,
+}
+
+impl PrimRef {
+    fn index(&self) -> u32 {
+        self.lo.w.to_bits()
+    }
+
+    /// Twice the centroid (the factor 2 cancels in the binning).
+    fn centroid2(&self) -> Vec4 {
+        self.lo + self.hi
+    }
+}
+
+/// A box as two SSE vectors (w lanes unused).
+#[derive(Clone, Copy, Debug)]
+struct Box4 {
+    lo: Vec4,
+    hi: Vec4,
+}
+
+impl Box4 {
+    const EMPTY: Box4 = Box4 {
+        lo: Vec4::splat(f32::INFINITY),
+        hi: Vec4::splat(f32::NEG_INFINITY),
+    };
+
+    fn grow(&mut self, lo: Vec4, hi: Vec4) {
+        self.lo = self.lo.min(lo);
+        self.hi = self.hi.max(hi);
+    }
+
+    fn half_area(&self) -> f32 {
+        let e = (self.hi - self.lo).max(Vec4::ZERO);
+        e.x * e.y + e.y * e.z + e.z * e.x
+    }
+
+    fn aabb(&self) -> Aabb {
+        Aabb::from_min_max(self.lo.truncate(), self.hi.truncate())
+    }
 }
 
 enum BNode {
@@ -116,62 +159,83 @@ impl BNode {
 /// says: it bounds the tree depth (and the traversal stack) for any input.
 const SAH_DEPTH_LIMIT: u32 = 40;
 
-fn build_binary(refs: &mut [u32], offset: usize, prims: &[Prim], depth: u32) -> BNode {
-    let n = refs.len();
-    let mut bounds = Aabb::EMPTY;
-    let mut cbounds = Aabb::EMPTY;
-    for &r in refs.iter() {
-        let p = &prims[r as usize];
-        bounds = bounds.union(p.bounds);
-        cbounds = cbounds.grow(p.centroid);
+/// The bounds of a set of primitives and of their (doubled) centroids.
+fn bounds_of(prims: &[PrimRef]) -> (Box4, Box4) {
+    let mut bounds = Box4::EMPTY;
+    let mut cbounds = Box4::EMPTY;
+    for p in prims {
+        bounds.grow(p.lo, p.hi);
+        let c = p.centroid2();
+        cbounds.grow(c, c);
     }
+    (bounds, cbounds)
+}
+
+/// Builds the subtree of `prims`, whose bounds and centroid bounds the
+/// caller has computed (the partition of the parent produces them).
+fn build_binary(
+    prims: &mut [PrimRef],
+    offset: usize,
+    depth: u32,
+    (bounds, cbounds): (Box4, Box4),
+) -> BNode {
+    let n = prims.len();
     let leaf = BNode::Leaf {
-        bounds,
+        bounds: bounds.aabb(),
         start: offset,
         count: n,
     };
     if n <= 2 {
         return leaf;
     }
-    let extent = cbounds.extent();
-    // Binned SAH over the three axes.
+    let extent = cbounds.hi - cbounds.lo;
+    // Binned SAH over the three axes at once: one pass over the primitives.
+    // Small nodes use half the bins (the sweep, not the binning, dominates there).
+    let nb = if n > 64 { BINS } else { BINS / 2 };
+    #[expect(clippy::cast_precision_loss, reason = "nb ≤ 16")]
+    let nbf = nb as f32;
+    let scale = Vec4::new(
+        if extent.x > 0.0 { nbf / extent.x } else { 0.0 },
+        if extent.y > 0.0 { nbf / extent.y } else { 0.0 },
+        if extent.z > 0.0 { nbf / extent.z } else { 0.0 },
+        0.0,
+    );
+    let mut bin_bounds = [[Box4::EMPTY; BINS]; 3];
+    let mut bin_count = [[0u32; BINS]; 3];
+    for p in prims.iter() {
+        let b = bins_of(p.centroid2(), cbounds.lo, scale, nb);
+        for axis in 0..3 {
+            bin_bounds[axis][b[axis]].grow(p.lo, p.hi);
+            bin_count[axis][b[axis]] += 1;
+        }
+    }
     #[expect(
         clippy::cast_precision_loss,
         reason = "counts are far below 2^24 per bin evaluation"
     )]
     let leaf_cost = n as f32;
+    let parent_area = bounds.half_area().max(f32::MIN_POSITIVE);
     let mut best: Option<(usize, usize, f32)> = None; // axis, split bin, cost
     for axis in 0..3 {
         if extent[axis] <= 0.0 || !extent[axis].is_finite() {
             continue;
         }
-        #[expect(clippy::cast_precision_loss, reason = "BINS is small")]
-        let scale = BINS as f32 / extent[axis];
-        let mut bin_bounds = [Aabb::EMPTY; BINS];
-        let mut bin_count = [0usize; BINS];
-        for &r in refs.iter() {
-            let p = &prims[r as usize];
-            let b = bin_of(p.centroid[axis], cbounds.min[axis], scale);
-            bin_bounds[b] = bin_bounds[b].union(p.bounds);
-            bin_count[b] += 1;
-        }
         // Sweep from the right, then from the left.
         let mut right_area = [0.0f32; BINS];
-        let mut right_count = [0usize; BINS];
-        let mut acc = Aabb::EMPTY;
+        let mut right_count = [0u32; BINS];
+        let mut acc = Box4::EMPTY;
         let mut cnt = 0;
-        for b in (1..BINS).rev() {
-            acc = acc.union(bin_bounds[b]);
-            cnt += bin_count[b];
+        for b in (1..nb).rev() {
+            acc.grow(bin_bounds[axis][b].lo, bin_bounds[axis][b].hi);
+            cnt += bin_count[axis][b];
             right_area[b] = acc.half_area();
             right_count[b] = cnt;
         }
-        let mut acc = Aabb::EMPTY;
+        let mut acc = Box4::EMPTY;
         let mut cnt = 0;
-        let parent_area = bounds.half_area().max(f32::MIN_POSITIVE);
-        for b in 1..BINS {
-            acc = acc.union(bin_bounds[b - 1]);
-            cnt += bin_count[b - 1];
+        for b in 1..nb {
+            acc.grow(bin_bounds[axis][b - 1].lo, bin_bounds[axis][b - 1].hi);
+            cnt += bin_count[axis][b - 1];
             if cnt == 0 || right_count[b] == 0 {
                 continue;
             }
@@ -189,15 +253,10 @@ fn build_binary(refs: &mut [u32], offset: usize, prims: &[Prim], depth: u32) -> 
     } else {
         best
     };
-    let mid = match best {
-        Some((axis, split, cost)) if cost < leaf_cost || n > MAX_LEAF => {
-            #[expect(clippy::cast_precision_loss, reason = "BINS is small")]
-            let scale = BINS as f32 / extent[axis];
-            let lo = cbounds.min[axis];
-            partition(refs, |r| {
-                bin_of(prims[r as usize].centroid[axis], lo, scale) < split
-            })
-        }
+    let (mid, lb, rb) = match best {
+        Some((axis, split, cost)) if cost < leaf_cost || n > MAX_LEAF => partition(prims, |p| {
+            bins_of(p.centroid2(), cbounds.lo, scale, nb)[axis] < split
+        }),
         Some(_) => return leaf,
         None if n <= MAX_LEAF => return leaf,
         None => {
@@ -206,53 +265,79 @@ fn build_binary(refs: &mut [u32], offset: usize, prims: &[Prim], depth: u32) -> 
             let axis = (0..3)
                 .max_by(|&a, &b| extent[a].total_cmp(&extent[b]))
                 .unwrap_or(0);
-            refs.sort_unstable_by(|&a, &b| {
-                prims[a as usize].centroid[axis].total_cmp(&prims[b as usize].centroid[axis])
-            });
-            n / 2
+            prims.sort_unstable_by(|a, b| a.centroid2()[axis].total_cmp(&b.centroid2()[axis]));
+            let (l, r) = prims.split_at(n / 2);
+            (n / 2, bounds_of(l), bounds_of(r))
         }
     };
-    let mid = if mid == 0 || mid == n { n / 2 } else { mid };
-    let (left, right) = refs.split_at_mut(mid);
+    let (left, right) = prims.split_at_mut(mid);
     let (l, r) = if n > PARALLEL_THRESHOLD {
         rayon::join(
-            || build_binary(left, offset, prims, depth + 1),
-            || build_binary(right, offset + mid, prims, depth + 1),
+            || build_binary(left, offset, depth + 1, lb),
+            || build_binary(right, offset + mid, depth + 1, rb),
         )
     } else {
         (
-            build_binary(left, offset, prims, depth + 1),
-            build_binary(right, offset + mid, prims, depth + 1),
+            build_binary(left, offset, depth + 1, lb),
+            build_binary(right, offset + mid, depth + 1, rb),
         )
     };
     BNode::Inner {
-        bounds,
+        bounds: bounds.aabb(),
         children: Box::new([l, r]),
     }
 }
 
+/// The bin of a (doubled) centroid on each axis, below `nb`.
 #[inline]
-#[expect(
-    clippy::cast_possible_truncation,
-    clippy::cast_sign_loss,
-    reason = "clamped to the bin range"
-)]
-fn bin_of(c: f32, lo: f32, scale: f32) -> usize {
-    let b = ((c - lo) * scale) as usize;
-    b.min(BINS - 1)
+fn bins_of(c2: Vec4, lo: Vec4, scale: Vec4, nb: usize) -> [usize; 3] {
+    // Round by the float trick: adding 2^23 to a value in [-0.5, 2^23)
+    // leaves the nearest integer in the low mantissa bits (SIMD adds, no
+    // saturating float-to-int conversions); subtracting 0.5 first makes it
+    // the floor except at exact integers, which is as good a bin boundary.
+    #[expect(clippy::cast_precision_loss, reason = "nb ≤ 16")]
+    let top = (nb - 1) as f32;
+    let b = ((c2 - lo) * scale - Vec4::splat(0.5))
+        .min(Vec4::splat(top))
+        .max(Vec4::ZERO)
+        + Vec4::splat(8_388_608.0);
+    let mask = 0x7F_FFFF;
+    [
+        (b.x.to_bits() & mask) as usize,
+        (b.y.to_bits() & mask) as usize,
+        (b.z.to_bits() & mask) as usize,
+    ]
 }
 
-/// Stable-enough in-place partition; returns the number of elements for
-/// which `pred` holds (they come first).
-fn partition(refs: &mut [u32], pred: impl Fn(u32) -> bool) -> usize {
+/// In-place partition: the elements for which `pred` holds come first.
+/// Returns their count and the bounds (and centroid bounds) of both sides,
+/// gathered in the same pass. An empty side (every element on one side,
+/// which the SAH sweep never picks) is split by count instead.
+fn partition(
+    prims: &mut [PrimRef],
+    pred: impl Fn(&PrimRef) -> bool,
+) -> (usize, (Box4, Box4), (Box4, Box4)) {
+    let (mut lb, mut lc, mut rb, mut rc) = (Box4::EMPTY, Box4::EMPTY, Box4::EMPTY, Box4::EMPTY);
     let mut i = 0;
-    for j in 0..refs.len() {
-        if pred(refs[j]) {
-            refs.swap(i, j);
+    for j in 0..prims.len() {
+        let p = prims[j];
+        let c = p.centroid2();
+        if pred(&p) {
+            lb.grow(p.lo, p.hi);
+            lc.grow(c, c);
+            prims.swap(i, j);
             i += 1;
+        } else {
+            rb.grow(p.lo, p.hi);
+            rc.grow(c, c);
         }
     }
-    i
+    if i == 0 || i == prims.len() {
+        let mid = prims.len() / 2;
+        let (l, r) = prims.split_at(mid);
+        return (mid, bounds_of(l), bounds_of(r));
+    }
+    (i, (lb, lc), (rb, rc))
 }
 
 impl Bvh {
@@ -261,35 +346,40 @@ impl Bvh {
     /// faster for tiny scenes).
     #[must_use]
     pub fn build(ids: &[u32], tri: impl Fn(u32) -> [Vec3; 3] + Sync, flat: bool) -> Bvh {
-        let prims: Vec<Prim> = ids
+        let mut prims: Vec<PrimRef> = ids
             .iter()
-            .map(|&id| {
-                let v = tri(id);
-                let bounds = Aabb::from_points(v);
-                Prim {
-                    bounds,
-                    centroid: bounds.center(),
+            .enumerate()
+            .map(|(k, &id)| {
+                let b = Aabb::from_points(tri(id));
+                let index = f32::from_bits(u32::try_from(k).unwrap_or(u32::MAX));
+                PrimRef {
+                    lo: b.min.extend(index),
+                    hi: b.max.extend(0.0),
                 }
             })
             .collect();
-        let mut refs: Vec<u32> = (0..u32::try_from(ids.len()).unwrap_or(u32::MAX)).collect();
         let mut bvh = Bvh::default();
         if ids.is_empty() {
             bvh.root = EMPTY;
             return bvh;
         }
         let tree = if flat {
+            let mut b = Box4::EMPTY;
+            for p in &prims {
+                b.grow(p.lo, p.hi);
+            }
             BNode::Leaf {
-                bounds: prims.iter().fold(Aabb::EMPTY, |a, p| a.union(p.bounds)),
+                bounds: b.aabb(),
                 start: 0,
                 count: ids.len(),
             }
         } else {
-            build_binary(&mut refs, 0, &prims, 0)
+            let b = bounds_of(&prims);
+            build_binary(&mut prims, 0, 0, b)
         };
         bvh.bounds = tree.bounds();
-        bvh.verts = refs.iter().map(|&r| tri(ids[r as usize])).collect();
-        bvh.ids = refs.iter().map(|&r| ids[r as usize]).collect();
+        bvh.ids = prims.iter().map(|p| ids[p.index() as usize]).collect();
+        bvh.verts = bvh.ids.iter().map(|&id| tri(id)).collect();
         match &tree {
             BNode::Leaf { start, count, .. } => {
                 bvh.root = LEAF | u32::try_from(*start).unwrap_or(0);
@@ -308,33 +398,40 @@ impl Bvh {
     /// Fills node `slot` from the binary subtree `node`; returns the depth.
     fn collapse(&mut self, node: &BNode, slot: usize) -> u32 {
         // Gather up to four children by opening the largest inner child.
-        let mut kids: Vec<&BNode> = match node {
-            BNode::Inner { children, .. } => vec![&children[0], &children[1]],
-            BNode::Leaf { .. } => vec![node],
+        let mut kids: [&BNode; 4] = [node; 4];
+        let mut len = match node {
+            BNode::Inner { children, .. } => {
+                kids[0] = &children[0];
+                kids[1] = &children[1];
+                2
+            }
+            BNode::Leaf { .. } => 1,
         };
-        while kids.len() < 4 {
-            let open = kids
-                .iter()
-                .enumerate()
-                .filter(|(_, k)| matches!(k, BNode::Inner { .. }))
-                .max_by(|a, b| {
-                    a.1.bounds()
-                        .half_area()
-                        .total_cmp(&b.1.bounds().half_area())
-                })
-                .map(|(i, _)| i);
+        while len < 4 {
+            let mut open = None;
+            let mut best_area = f32::NEG_INFINITY;
+            for (i, k) in kids[..len].iter().enumerate() {
+                if let BNode::Inner { bounds, .. } = k {
+                    let a = bounds.half_area();
+                    if a > best_area {
+                        best_area = a;
+                        open = Some(i);
+                    }
+                }
+            }
             let Some(i) = open else { break };
             let BNode::Inner { children, .. } = kids[i] else {
                 break;
             };
-            kids.swap_remove(i);
-            kids.push(&children[0]);
-            kids.push(&children[1]);
+            kids[i] = &children[0];
+            kids[len] = &children[1];
+            len += 1;
         }
         let mut n = empty_node();
         let mut depth = 0;
-        let mut pending = Vec::new();
-        for (k, kid) in kids.iter().enumerate() {
+        let mut pending: [(usize, usize); 4] = [(0, 0); 4];
+        let mut np = 0;
+        for (k, kid) in kids[..len].iter().enumerate() {
             let b = kid.bounds();
             set_lane(&mut n, k, b);
             match kid {
@@ -346,13 +443,14 @@ impl Bvh {
                     let idx = self.nodes.len();
                     self.nodes.push(empty_node());
                     n.child[k] = u32::try_from(idx).unwrap_or(EMPTY);
-                    pending.push((*kid, idx));
+                    pending[np] = (k, idx);
+                    np += 1;
                 }
             }
         }
         self.nodes[slot] = n;
-        for (kid, idx) in pending {
-            depth = depth.max(self.collapse(kid, idx));
+        for &(k, idx) in &pending[..np] {
+            depth = depth.max(self.collapse(kids[k], idx));
         }
         depth + 1
     }

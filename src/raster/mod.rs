@@ -32,7 +32,7 @@ use rayon::prelude::*;
 use crate::accel::{Accel, AccelOptions, ShadowRays};
 use crate::camera::Projection;
 use crate::color::Rgb;
-use crate::coverage::{FillRule, SampleGrid, SnappedTri};
+use crate::coverage::{FillRule, SampleGrid, SnappedTri, Sub8, bbox_samples, doubled_area};
 use crate::frame::{BACKGROUND, Frame};
 use crate::math::{Bary, DVec3, to_f64};
 use crate::options::{DepthFormat, ShadowMode};
@@ -116,6 +116,16 @@ impl Record {
         )
     }
 }
+
+/// A placeholder for the band lists before they are filled.
+static EMPTY_RECORD: Record = Record {
+    x: [0; 3],
+    y: [0; 3],
+    tri: 0,
+    rows: (0, 0),
+    back: false,
+    rule: FillRule::TopLeft,
+};
 
 /// Interpolation planes of a triangle: `λ_i = b_i/w` and the depth plane,
 /// each `m0·X + m1·Y + m2` relative to an anchor `(ax, ay)` (pixels).
@@ -267,7 +277,7 @@ pub fn visibility(scene: &TriScene, opts: &RasterOptions) -> VisibilityBuffers {
             )
         })
         .collect();
-    let records: Vec<Record> = chunks.into_iter().flatten().collect();
+    let records: Vec<&Record> = chunks.iter().flatten().collect();
 
     // Bin records to bands.
     let bands = sh.div_ceil(BAND) as usize;
@@ -280,11 +290,12 @@ pub fn visibility(scene: &TriScene, opts: &RasterOptions) -> VisibilityBuffers {
     for b in 0..bands {
         counts[b + 1] += counts[b];
     }
-    let mut lists = vec![0u32; counts[bands]];
+    let mut lists: Vec<&Record> =
+        vec![records.first().copied().unwrap_or(&EMPTY_RECORD); counts[bands]];
     let mut fill = counts.clone();
-    for (k, r) in records.iter().enumerate() {
+    for r in &records {
         for b in (r.rows.0 / BAND)..=((r.rows.1 - 1) / BAND) {
-            lists[fill[b as usize]] = u32::try_from(k).unwrap_or(u32::MAX);
+            lists[fill[b as usize]] = r;
             fill[b as usize] += 1;
         }
     }
@@ -310,8 +321,7 @@ pub fn visibility(scene: &TriScene, opts: &RasterOptions) -> VisibilityBuffers {
             let rows = row0..(row0 + BAND).min(sh);
             let mut writes = 0u64;
             let mut frags = 0u64;
-            for &k in &lists[counts[b]..counts[b + 1]] {
-                let r = &records[k as usize];
+            for r in &lists[counts[b]..counts[b + 1]] {
                 let (w, f) = scan_record(
                     scene,
                     &hv,
@@ -354,80 +364,94 @@ fn setup_triangle(
     tmp: &mut Vec<HVert>,
     out: &mut Vec<Record>,
 ) {
-    let (clip_planes, grid, (sw, sh)) = (&ctx.clip_planes, ctx.grid, ctx.size);
-    let near = -clip_planes[0].c[4];
+    let near = -ctx.clip_planes[0].c[4];
+    let guard_ok = |p: &(f64, f64)| p.0.abs() < GUARD_PX && p.1.abs() < GUARD_PX;
+    // The common case: in front of the near plane and inside the guard band.
+    if v.iter().all(|p| p.z >= near) {
+        let s = [v[0].screen(), v[1].screen(), v[2].screen()];
+        if s.iter().all(guard_ok) {
+            push_snapped(&s, tri, cull_back, ctx, out);
+            return;
+        }
+    }
     if v.iter().all(|p| p.z < near) {
         return;
     }
-    let in_front = v.iter().all(|p| p.z >= near);
-    let guard_ok = |p: &HVert| {
-        let (x, y) = p.screen();
-        x.abs() < GUARD_PX && y.abs() < GUARD_PX
-    };
     poly.clear();
     poly.extend_from_slice(v);
-    if !in_front || !v.iter().all(guard_ok) {
-        for (k, plane) in clip_planes.iter().enumerate() {
-            if k > 0 && poly.iter().all(guard_ok) {
-                break;
-            }
-            clip_polygon(poly, plane, tmp);
-            std::mem::swap(poly, tmp);
-            if poly.len() < 3 {
-                return;
-            }
+    for (k, plane) in ctx.clip_planes.iter().enumerate() {
+        if k > 0 && poly.iter().all(|p| guard_ok(&p.screen())) {
+            break;
+        }
+        clip_polygon(poly, plane, tmp);
+        std::mem::swap(poly, tmp);
+        if poly.len() < 3 {
+            return;
         }
     }
-    let screen: Vec<(f64, f64)> = poly.iter().map(HVert::screen).collect();
-    for k in 1..screen.len() - 1 {
-        let Some(st) = SnappedTri::with_rule([screen[0], screen[k], screen[k + 1]], ctx.rule)
-        else {
-            continue;
-        };
-        if cull_back && st.is_back_facing() {
-            continue;
-        }
-        let rows = st.sample_rows(grid, 0..sh);
-        if rows.is_empty() || st.sample_cols(grid, 0..sw).is_empty() {
-            continue;
-        }
-        let vs = st.vertices();
-        #[expect(
-            clippy::cast_possible_truncation,
-            reason = "snapped coordinates are below 2^26"
-        )]
-        out.push(Record {
-            x: vs.map(|q| q.0 as i32),
-            y: vs.map(|q| q.1 as i32),
+    let s0 = poly[0].screen();
+    for k in 1..poly.len() - 1 {
+        push_snapped(
+            &[s0, poly[k].screen(), poly[k + 1].screen()],
             tri,
-            rows: (rows.start, rows.end),
-            back: st.is_back_facing(),
-            rule: ctx.rule,
-        });
+            cull_back,
+            ctx,
+            out,
+        );
     }
+}
+
+/// Snaps a screen triangle and records it if it can cover a sample.
+fn push_snapped(
+    p: &[(f64, f64); 3],
+    tri: u32,
+    cull_back: bool,
+    ctx: &SetupCtx<'_>,
+    out: &mut Vec<Record>,
+) {
+    let s = p.map(|(x, y)| (Sub8::snap(x).0, Sub8::snap(y).0));
+    let area2 = doubled_area(&s);
+    let back = area2 >= 0;
+    if area2 == 0 || (cull_back && back) {
+        return;
+    }
+    let (rows, cols) = bbox_samples(&s, ctx.grid, ctx.size);
+    if rows.is_empty() || cols.is_empty() {
+        return;
+    }
+    #[expect(
+        clippy::cast_possible_truncation,
+        reason = "snapped coordinates are below 2^26"
+    )]
+    out.push(Record {
+        x: s.map(|q| q.0 as i32),
+        y: s.map(|q| q.1 as i32),
+        tri,
+        rows: (rows.start, rows.end),
+        back,
+        rule: ctx.rule,
+    });
 }
 
 /// The planes `λ_i = b_i/w` (2-D homogeneous rasterization, Olano & Greer
 /// 1997) and the depth plane of triangle `tri`, relative to `(ax, ay)`;
 /// `None` when the triangle's plane passes through the eye.
 fn triangle_planes(v: &[HVert; 3], perspective: bool, ax: f64, ay: f64) -> Option<Planes> {
-    // Columns h_i = (X_i·w_i, Y_i·w_i, w_i); λ = M⁻¹·(X, Y, 1).
-    let m = glam::DMat3::from_cols(
-        DVec3::new(v[0].xh, v[0].yh, v[0].w),
-        DVec3::new(v[1].xh, v[1].yh, v[1].w),
-        DVec3::new(v[2].xh, v[2].yh, v[2].w),
-    );
-    let det = m.determinant();
-    let scale = m.x_axis.length() * m.y_axis.length() * m.z_axis.length();
-    if det == 0.0 || !det.is_finite() || det.abs() <= 1e-14 * scale {
+    // Columns h_i = (X_i·w_i, Y_i·w_i, w_i); λ = M⁻¹·(X, Y, 1). The rows of
+    // M⁻¹ are (h1 × h2, h2 × h0, h0 × h1) / det.
+    let h = v.map(|p| DVec3::new(p.xh, p.yh, p.w));
+    let rows = [h[1].cross(h[2]), h[2].cross(h[0]), h[0].cross(h[1])];
+    let det = h[0].dot(rows[0]);
+    // Singular relative to the columns' lengths: the plane passes through the eye.
+    let scale2 = h[0].length_squared() * h[1].length_squared() * h[2].length_squared();
+    if det == 0.0 || !det.is_finite() || det * det <= 1e-28 * scale2 {
         return None;
     }
-    let inv = m.inverse();
-    // Row i of M⁻¹ gives λ_i; relative to the anchor: λ_i = r_i0·dx + r_i1·dy + λ_i(anchor).
-    let row = |i: usize| DVec3::new(inv.x_axis[i], inv.y_axis[i], inv.z_axis[i]);
+    let inv_det = 1.0 / det;
     let mut lambda = [[0.0; 3]; 3];
-    for (i, l) in lambda.iter_mut().enumerate() {
-        let r = row(i);
+    for (l, r) in lambda.iter_mut().zip(rows) {
+        let r = r * inv_det;
+        // Relative to the anchor: λ_i = r_x·dx + r_y·dy + λ_i(anchor).
         *l = [r.x, r.y, r.x * ax + r.y * ay + r.z];
     }
     // Depth plane: 1/z = Σλ (perspective); z = Σ λ_i z_i (orthographic, Σλ = 1).
@@ -437,9 +461,9 @@ fn triangle_planes(v: &[HVert; 3], perspective: bool, ax: f64, ay: f64) -> Optio
         [v[0].z, v[1].z, v[2].z]
     };
     let mut depth = [0.0; 3];
-    for (i, l) in lambda.iter().enumerate() {
+    for (w, l) in weights.iter().zip(&lambda) {
         for c in 0..3 {
-            depth[c] += weights[i] * l[c];
+            depth[c] += w * l[c];
         }
     }
     Some(Planes {
@@ -468,24 +492,32 @@ fn walk_record(
     let Some(st) = r.snapped() else {
         return;
     };
-    let idx = scene.tris[r.tri as usize];
-    let v = idx.map(|i| hv[i as usize]);
-    let (ax, ay) = (f64::from(r.x[0]) / 256.0, f64::from(r.y[0]) / 256.0);
-    let Some(pl) = triangle_planes(&v, perspective, ax, ay) else {
-        return;
-    };
     let n = f64::from(grid.n);
     let dx = 1.0 / n;
-    let step_l = [
-        pl.lambda[0][0] * dx,
-        pl.lambda[1][0] * dx,
-        pl.lambda[2][0] * dx,
-    ];
-    let step_d = pl.depth[0] * dx;
+    // The planes are set up on the first covered span only: most records
+    // of a dense mesh cover no sample at all.
+    let mut planes: Option<Option<(Planes, [f64; 3], f64)>> = None;
     st.for_each_span(grid, rows, 0..sw, |row, cols| {
+        let setup = planes.get_or_insert_with(|| {
+            let idx = scene.tris[r.tri as usize];
+            let v = idx.map(|i| hv[i as usize]);
+            let (ax, ay) = (f64::from(r.x[0]) / 256.0, f64::from(r.y[0]) / 256.0);
+            triangle_planes(&v, perspective, ax, ay).map(|pl| {
+                let step_l = [
+                    pl.lambda[0][0] * dx,
+                    pl.lambda[1][0] * dx,
+                    pl.lambda[2][0] * dx,
+                ];
+                let step_d = pl.depth[0] * dx;
+                (pl, step_l, step_d)
+            })
+        });
+        let Some((pl, step_l, step_d)) = setup else {
+            return;
+        };
         // Anchor: direct evaluation at the span's first sample.
-        let x0 = (f64::from(cols.start) + 0.5) / n - pl.ax;
-        let y = (f64::from(row) + 0.5) / n - pl.ay;
+        let x0 = (f64::from(cols.start) + 0.5) * dx - pl.ax;
+        let y = (f64::from(row) + 0.5) * dx - pl.ay;
         let mut l = [
             Planes::eval(&pl.lambda[0], x0, y),
             Planes::eval(&pl.lambda[1], x0, y),
@@ -493,11 +525,11 @@ fn walk_record(
         ];
         let mut d = Planes::eval(&pl.depth, x0, y);
         for col in cols {
-            visit(row, col, &l, d, &pl);
+            visit(row, col, &l, d, pl);
             l[0] += step_l[0];
             l[1] += step_l[1];
             l[2] += step_l[2];
-            d += step_d;
+            d += *step_d;
         }
     });
 }
@@ -592,7 +624,7 @@ fn records(
         size: (cam.sample_width(), cam.sample_height()),
         rule,
     };
-    let mut out = Vec::new();
+    let mut out = Vec::with_capacity(range.len());
     let mut poly = Vec::with_capacity(8);
     let mut tmp = Vec::with_capacity(8);
     for t in range {

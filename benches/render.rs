@@ -1,0 +1,179 @@
+//! Performance of the pieces that dominate a frame, on the 940 544-triangle
+//! bunny at 1920×1080 (`benches/scenes/bunny_1m.toml`, subdivided 4 times):
+//! BVH build, primary and shadow rays, the rasterizer's visibility pass and
+//! full frames, on one thread and on all threads; and loading and
+//! tessellating the largest bundled meshes. See benches/README.md.
+
+use std::path::Path;
+use std::sync::OnceLock;
+
+use divan::counter::ItemsCount;
+use divan::{Bencher, black_box};
+use rendiff::accel::{Accel, AccelOptions, ShadowRays};
+use rendiff::math::Ray;
+use rendiff::raster;
+use rendiff::shade::Visibility;
+use rendiff::tri_scene::TriScene;
+use rendiff::{Overrides, Prepared};
+
+fn main() {
+    divan::main();
+}
+
+fn root() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// The 940k-triangle scene, built once.
+fn bunny() -> &'static (Prepared, TriScene) {
+    static S: OnceLock<(Prepared, TriScene)> = OnceLock::new();
+    S.get_or_init(|| {
+        let job = Prepared::load(
+            &root().join("benches/scenes/bunny_1m.toml"),
+            &Overrides::default(),
+        )
+        .unwrap();
+        let t = job.tri.subdivided(4);
+        (job, t)
+    })
+}
+
+/// Threads: 1, and all of the machine's.
+const THREADS: &[usize] = &[1, 0];
+
+fn pool(threads: usize) -> rayon::ThreadPool {
+    let mut b = rayon::ThreadPoolBuilder::new();
+    if threads > 0 {
+        b = b.num_threads(threads);
+    }
+    b.build().unwrap()
+}
+
+/// Loading and tessellating the scene with the two largest bundled meshes
+/// (Snowden 37 629 and the dragon 11 102 triangles).
+#[divan::bench(sample_count = 10)]
+fn load_and_tessellate_dense() -> Prepared {
+    Prepared::load(&root().join("scenes/dense.toml"), &Overrides::default()).unwrap()
+}
+
+#[divan::bench(args = THREADS, sample_count = 5)]
+fn bvh_build_940k(bencher: Bencher, threads: usize) {
+    let t = &bunny().1;
+    let p = pool(threads);
+    bencher
+        .counter(ItemsCount::new(t.len()))
+        .bench(|| p.install(|| black_box(Accel::new(t, AccelOptions::default()))));
+}
+
+/// One closest-hit query per pixel (1920×1080 primary rays), no shading.
+#[divan::bench(args = THREADS, sample_count = 5)]
+fn primary_rays_940k_1080p(bencher: Bencher, threads: usize) {
+    use rayon::prelude::*;
+    let t = &bunny().1;
+    let accel = Accel::new(t, AccelOptions::default());
+    let cam = &t.camera;
+    let rays: Vec<Ray> = (0..cam.sample_height())
+        .flat_map(|y| (0..cam.sample_width()).map(move |x| (x, y)))
+        .map(|(x, y)| cam.sample_ray(x, y))
+        .collect();
+    let p = pool(threads);
+    bencher.counter(ItemsCount::new(rays.len())).bench(|| {
+        p.install(|| {
+            rays.par_chunks(4096)
+                .map(|c| c.iter().filter(|r| accel.intersect(r).is_some()).count())
+                .sum::<usize>()
+        })
+    });
+}
+
+/// One shadow ray toward the light from every visible point.
+#[divan::bench(args = THREADS, sample_count = 5)]
+fn shadow_rays_940k_1080p(bencher: Bencher, threads: usize) {
+    use rayon::prelude::*;
+    let t = &bunny().1;
+    let accel = Accel::new(t, AccelOptions::default());
+    let cam = &t.camera;
+    let light = match t.lights[0].kind {
+        rendiff::shade::LightKind::Point { position } => position,
+        rendiff::shade::LightKind::Parallel { .. } => unreachable!(),
+    };
+    let origins: Vec<rendiff::math::Vec3> = (0..cam.sample_height())
+        .flat_map(|y| (0..cam.sample_width()).map(move |x| (x, y)))
+        .filter_map(|(x, y)| {
+            let r = cam.sample_ray(x, y);
+            accel.intersect(&r).map(|h| {
+                let sp = t.surface_at(h.prim, rendiff::math::Bary(h.b));
+                let dir = (light - sp.p).normalize();
+                rendiff::shade::offset_origin(sp.p, sp.p_error, sp.ng, dir)
+            })
+        })
+        .collect();
+    let vis = ShadowRays::new(&accel);
+    let p = pool(threads);
+    bencher.counter(ItemsCount::new(origins.len())).bench(|| {
+        p.install(|| {
+            origins
+                .par_chunks(4096)
+                .map(|c| {
+                    c.iter()
+                        .filter(|o| {
+                            let d = light - **o;
+                            vis.transmittance(0, **o, d.normalize(), d.length())
+                                .is_black()
+                        })
+                        .count()
+                })
+                .sum::<usize>()
+        })
+    });
+}
+
+/// The rasterizer's visibility pass (setup, coverage, depth test).
+#[divan::bench(args = THREADS, sample_count = 5)]
+fn raster_visibility_940k_1080p(bencher: Bencher, threads: usize) {
+    let (job, t) = bunny();
+    let mut opts = job.raster_options();
+    opts.frustum_cull = vec![false; t.objects.len()];
+    opts.backface_cull = vec![false; t.objects.len()];
+    let p = pool(threads);
+    bencher
+        .counter(ItemsCount::new(t.len()))
+        .bench(|| p.install(|| black_box(raster::visibility(t, &opts))));
+}
+
+/// A full shaded frame with the light made shadowless (shadow rays cost the
+/// same in both backends): rasterizer.
+#[divan::bench(args = THREADS, sample_count = 5)]
+fn raster_frame_shadowless_940k_1080p(bencher: Bencher, threads: usize) {
+    let (job, t) = bunny();
+    let mut t = t.clone();
+    t.lights[0].shadowless = true;
+    let mut opts = job.raster_options();
+    opts.shadows_needed = false;
+    opts.frustum_cull = vec![false; t.objects.len()];
+    opts.backface_cull = vec![false; t.objects.len()];
+    let p = pool(threads);
+    bencher.bench(|| p.install(|| black_box(raster::render(&t, &opts))));
+}
+
+/// The same frame by the ray tracer (BVH build included, as in a render).
+#[divan::bench(args = THREADS, sample_count = 5)]
+fn ray_frame_shadowless_940k_1080p(bencher: Bencher, threads: usize) {
+    let (_, t) = bunny();
+    let mut t = t.clone();
+    t.lights[0].shadowless = true;
+    let p = pool(threads);
+    bencher.bench(|| {
+        p.install(|| {
+            let accel = Accel::new(&t, AccelOptions::default());
+            black_box(rendiff::ray::render(
+                &accel,
+                &rendiff::ray::RayOptions {
+                    max_depth: 1,
+                    shadows: false,
+                    gate_eps: 1e-4,
+                },
+            ))
+        })
+    });
+}
