@@ -128,21 +128,37 @@ fn shadow_rays_940k_1080p(bencher: Bencher, threads: usize) {
     });
 }
 
-/// The rasterizer's visibility pass (setup, coverage, depth test).
-#[divan::bench(args = THREADS, sample_count = 5)]
+/// The rasterizer's visibility pass (setup, coverage, depth test) as the
+/// render plan runs it: the bunny is closed and seen from outside, so its
+/// back faces are culled.
+#[divan::bench(args = THREADS, sample_count = 10)]
 fn raster_visibility_940k_1080p(bencher: Bencher, threads: usize) {
     let (job, t) = bunny();
-    let mut opts = job.raster_options();
-    opts.frustum_cull = vec![false; t.objects.len()];
-    opts.backface_cull = vec![false; t.objects.len()];
+    let opts = job.raster_options();
+    assert!(
+        opts.backface_cull[0],
+        "the plan culls the bunny's back faces"
+    );
     let p = pool(threads);
     bencher
         .counter(ItemsCount::new(t.len()))
         .bench(|| p.install(|| black_box(raster::visibility(t, &opts))));
 }
 
+/// The same with every back face rasterized too (`--no-plan`).
+#[divan::bench(sample_count = 5)]
+fn raster_visibility_940k_1080p_no_culling(bencher: Bencher) {
+    let (job, t) = bunny();
+    let mut opts = job.raster_options();
+    opts.backface_cull = vec![false; t.objects.len()];
+    let p = pool(1);
+    bencher
+        .counter(ItemsCount::new(t.len()))
+        .bench(|| p.install(|| black_box(raster::visibility(t, &opts))));
+}
+
 /// A full shaded frame with the light made shadowless (shadow rays cost the
-/// same in both backends): rasterizer.
+/// same in both backends): rasterizer, as the plan runs it.
 #[divan::bench(args = THREADS, sample_count = 5)]
 fn raster_frame_shadowless_940k_1080p(bencher: Bencher, threads: usize) {
     let (job, t) = bunny();
@@ -150,30 +166,60 @@ fn raster_frame_shadowless_940k_1080p(bencher: Bencher, threads: usize) {
     t.lights[0].shadowless = true;
     let mut opts = job.raster_options();
     opts.shadows_needed = false;
-    opts.frustum_cull = vec![false; t.objects.len()];
-    opts.backface_cull = vec![false; t.objects.len()];
     let p = pool(threads);
     bencher.bench(|| p.install(|| black_box(raster::render(&t, &opts))));
 }
 
-/// The same frame by the ray tracer (BVH build included, as in a render).
+fn shadowless_ray_options() -> rendiff::ray::RayOptions {
+    rendiff::ray::RayOptions {
+        max_depth: 1,
+        shadows: false,
+        gate_eps: rendiff::GATE_EPS,
+    }
+}
+
+/// The same frame by the ray tracer: primary rays and shading, with the
+/// BVH built beforehand.
 #[divan::bench(args = THREADS, sample_count = 5)]
 fn ray_frame_shadowless_940k_1080p(bencher: Bencher, threads: usize) {
     let (_, t) = bunny();
     let mut t = t.clone();
     t.lights[0].shadowless = true;
+    let accel = Accel::new(&t, AccelOptions::default());
     let p = pool(threads);
+    bencher
+        .bench(|| p.install(|| black_box(rendiff::ray::render(&accel, &shadowless_ray_options()))));
+}
+
+/// The ray tracer's whole render: BVH build, primary rays, shading.
+#[divan::bench(sample_count = 5)]
+fn ray_frame_shadowless_940k_1080p_with_build(bencher: Bencher) {
+    let (_, t) = bunny();
+    let mut t = t.clone();
+    t.lights[0].shadowless = true;
+    let p = pool(1);
     bencher.bench(|| {
         p.install(|| {
             let accel = Accel::new(&t, AccelOptions::default());
-            black_box(rendiff::ray::render(
-                &accel,
-                &rendiff::ray::RayOptions {
-                    max_depth: 1,
-                    shadows: false,
-                    gate_eps: 1e-4,
-                },
-            ))
+            black_box(rendiff::ray::render(&accel, &shadowless_ray_options()))
         })
     });
+}
+
+/// Memory of the geometry and of the BVH per triangle (printed once).
+#[divan::bench(sample_count = 1)]
+fn memory_per_triangle() {
+    let (_, t) = bunny();
+    let accel = Accel::new(t, AccelOptions::default());
+    let s = accel.stats();
+    #[allow(clippy::cast_precision_loss)]
+    let per = |b: usize| b as f64 / t.len() as f64;
+    eprintln!(
+        "memory: TriScene {:.1} B/triangle, BVH {:.1} B/triangle ({} nodes, depth {}, {} leaves)",
+        per(t.geometry_bytes()),
+        per(s.bytes),
+        s.nodes,
+        s.depth,
+        s.leaves
+    );
 }
