@@ -118,8 +118,14 @@ fn shadow_rays_940k_1080p(bencher: Bencher, threads: usize) {
                     c.iter()
                         .filter(|o| {
                             let d = light - **o;
-                            vis.transmittance(0, **o, d.normalize(), d.length())
-                                .is_black()
+                            vis.transmittance(&rendiff::shade::ShadowQuery {
+                                light: 0,
+                                origin: **o,
+                                dir: d.normalize(),
+                                t_max: d.length(),
+                                normal: d.normalize(),
+                            })
+                            .is_black()
                         })
                         .count()
                 })

@@ -244,9 +244,25 @@ pub struct SurfacePoint {
 /// segment. Opaque occluders give black; transparent ones multiply by
 /// `f·P + t` at every crossing, in order of increasing t (ties: lower id).
 pub trait Visibility: Sync {
-    /// Transmittance toward light `light` of the segment `origin + t·dir`,
-    /// `0 < t < t_max`.
-    fn transmittance(&self, light: usize, origin: Vec3, dir: Vec3, t_max: f32) -> Rgb;
+    /// Transmittance of a shadow segment.
+    fn transmittance(&self, q: &ShadowQuery) -> Rgb;
+}
+
+/// A shadow ray: the segment `origin + t·dir`, `0 < t < t_max`, toward light
+/// `light`, from a surface whose geometric normal is `normal` (a shadow map
+/// scales its depth bias with the angle between the two; rays ignore it).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ShadowQuery {
+    /// Index of the light.
+    pub light: usize,
+    /// Origin, already moved off the surface.
+    pub origin: Vec3,
+    /// Unit direction toward the light.
+    pub dir: Vec3,
+    /// End of the segment (∞ for a parallel light).
+    pub t_max: f32,
+    /// Unit geometric normal of the surface the ray leaves.
+    pub normal: Vec3,
 }
 
 /// A visibility that never blocks (for shadowless renders and tests).
@@ -254,7 +270,7 @@ pub trait Visibility: Sync {
 pub struct Unoccluded;
 
 impl Visibility for Unoccluded {
-    fn transmittance(&self, _light: usize, _origin: Vec3, _dir: Vec3, _t_max: f32) -> Rgb {
+    fn transmittance(&self, _q: &ShadowQuery) -> Rgb {
         Rgb::WHITE
     }
 }
@@ -459,7 +475,13 @@ pub fn shade(ctx: &ShadeContext<'_>, sp: &SurfacePoint, d: Vec3, vis: &dyn Visib
             } else {
                 f32::INFINITY
             };
-            let tr = vis.transmittance(i, origin, l, t_max);
+            let tr = vis.transmittance(&ShadowQuery {
+                light: i,
+                origin,
+                dir: l,
+                t_max,
+                normal: sp.ng,
+            });
             if tr != Rgb::WHITE {
                 flags |= shadow_flag(i);
             }
@@ -582,7 +604,7 @@ mod tests {
     /// Blocks every shadow ray.
     struct Wall;
     impl Visibility for Wall {
-        fn transmittance(&self, _: usize, _: Vec3, _: Vec3, _: f32) -> Rgb {
+        fn transmittance(&self, _: &ShadowQuery) -> Rgb {
             Rgb::BLACK
         }
     }

@@ -12,7 +12,7 @@ pub mod triangle;
 use crate::color::Rgb;
 use crate::math::{Ray, Vec3, to_f64};
 use crate::options::Geometry;
-use crate::shade::Visibility;
+use crate::shade::{ShadowQuery, Visibility};
 use crate::tri_scene::TriScene;
 use bvh::Bvh;
 pub use bvh::{BvhHit, BvhStats};
@@ -223,7 +223,8 @@ impl<'a, 's> ShadowRays<'a, 's> {
 }
 
 impl Visibility for ShadowRays<'_, '_> {
-    fn transmittance(&self, _light: usize, origin: Vec3, dir: Vec3, t_max: f32) -> Rgb {
+    fn transmittance(&self, q: &ShadowQuery) -> Rgb {
+        let (origin, dir, t_max) = (q.origin, q.dir, q.t_max);
         let a = self.accel;
         if !a.any_caster {
             return Rgb::WHITE;

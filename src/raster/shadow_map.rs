@@ -6,8 +6,9 @@
 //! bounding sphere. Each texel keeps the nearest depth of an opaque,
 //! shadow-casting triangle, rasterized with the shared coverage rule at
 //! texel centres. A point is in shadow when its own depth exceeds the
-//! stored one by more than a bias of 1.5 texels (in world units at that
-//! depth), which covers surfaces up to ~56° from facing the light.
+//! stored one by more than a bias of (1.5 + 2·tan θ) texels (in world units
+//! at that depth; θ between the surface's normal and the light, tan θ
+//! capped at 10): a surface tilted by θ changes depth by tan θ per texel.
 //! Transparent casters are ignored (a depth map cannot colour light) and
 //! `no_shadow` objects cast nothing, so the map's error is: aliasing at
 //! shadow edges, acne or light leaks where the bias is too small or too
@@ -18,8 +19,12 @@ use rayon::prelude::*;
 use super::clip::{HVert, clip_polygon, planes};
 use crate::color::Rgb;
 use crate::coverage::{SampleGrid, SnappedTri};
-use crate::math::{DVec3, Vec3, to_f64};
-use crate::shade::{LightKind, Visibility};
+use crate::math::{DVec3, to_f64};
+use crate::shade::{LightKind, ShadowQuery, Visibility};
+
+/// Largest depth slope (tan θ) the bias follows: beyond ~84° from facing
+/// the light, a wider bias would leak more light than it saves acne.
+const MAX_SLOPE: f64 = 10.0;
 use crate::tri_scene::TriScene;
 
 /// One depth map with its projection.
@@ -110,8 +115,9 @@ impl DepthMap {
         }
     }
 
-    /// `true` when `p` is farther than the stored depth by more than the bias.
-    fn shadowed(&self, p: DVec3) -> bool {
+    /// `true` when `p` is farther than the stored depth by more than the
+    /// bias: 1.5 texels plus `slope` texels (in world units at that depth).
+    fn shadowed(&self, p: DVec3, slope: f64) -> bool {
         let h = self.to_h(p);
         if h.w <= 0.0 {
             return false;
@@ -133,7 +139,7 @@ impl DepthMap {
         } else {
             2.0 * self.half / res
         };
-        h.z > stored + 1.5 * texel
+        h.z > stored + (1.5 + 2.0 * slope) * texel
     }
 }
 
@@ -225,11 +231,16 @@ impl ShadowMaps {
 }
 
 impl Visibility for ShadowMaps {
-    fn transmittance(&self, light: usize, origin: Vec3, _dir: Vec3, _t_max: f32) -> Rgb {
-        let Some(maps) = self.maps.get(light) else {
+    fn transmittance(&self, q: &ShadowQuery) -> Rgb {
+        let Some(maps) = self.maps.get(q.light) else {
             return Rgb::WHITE;
         };
-        let p = to_f64(origin);
+        let p = to_f64(q.origin);
+        // Slope-scaled bias: a surface at angle θ to the light spans
+        // tan θ texels of depth per texel.
+        let cos = f64::from(q.normal.dot(q.dir).abs()).max(1e-3);
+        let slope = ((1.0 - cos * cos).sqrt() / cos).min(MAX_SLOPE);
+        let light = q.light;
         let shadowed = match (self.point.get(light).copied().flatten(), maps.as_slice()) {
             (Some(o), faces) if faces.len() == 6 => {
                 let q = p - o;
@@ -241,9 +252,9 @@ impl Visibility for ShadowMaps {
                 } else {
                     4 + usize::from(q.z < 0.0)
                 };
-                faces[face].shadowed(p)
+                faces[face].shadowed(p, slope)
             }
-            (None, [m]) => m.shadowed(p),
+            (None, [m]) => m.shadowed(p, slope),
             _ => false,
         };
         if shadowed { Rgb::BLACK } else { Rgb::WHITE }

@@ -639,3 +639,47 @@ fn triangles_through_the_near_plane_agree_with_the_ray_tracer() {
         assert!(c.classes.iter().filter(|&&k| k == Class::Agree).count() > 0);
     }
 }
+
+/// Shadow maps are the rasterizer's own answer to shadows; their error
+/// against shadow rays is measured here (not bounded): the fraction of
+/// visible samples whose shadow decision differs, per resolution. It must
+/// shrink as the resolution grows and stay small at 4096.
+#[test]
+fn shadow_map_error_against_shadow_rays_is_measured() {
+    use rendiff::options::ShadowMode;
+    let mut report = String::new();
+    for name in ["spheres", "teapot", "bunny"] {
+        let job = crate::util::load(name, &rendiff::Overrides::default());
+        let rays = raster::render(&job.tri, &job.raster_options()).0;
+        let mut last = f64::INFINITY;
+        for res in [256u32, 1024, 4096] {
+            let mut opts = job.raster_options();
+            opts.shadows = ShadowMode::Map(res);
+            let map = raster::render(&job.tri, &opts).0;
+            let visible = rays.id.iter().filter(|&&i| i != BACKGROUND).count();
+            let differ = rays
+                .id
+                .iter()
+                .zip(&rays.flags)
+                .zip(&map.flags)
+                .filter(|((id, a), b)| **id != BACKGROUND && (**a ^ **b) & !1 != 0)
+                .count();
+            let rate = differ as f64 / visible as f64;
+            report.push_str(&format!(
+                "{name} map:{res}: {:.3} % of visible samples shadowed differently\n",
+                rate * 100.0
+            ));
+            assert!(
+                rate <= last * 1.5 + 1e-4,
+                "{name}: the error grew from {last} to {rate} at {res}"
+            );
+            last = rate;
+        }
+        assert!(
+            last < 0.02,
+            "{name}: {:.2} % still differ at 4096",
+            last * 100.0
+        );
+    }
+    eprint!("{report}");
+}

@@ -43,6 +43,16 @@ fn random_dir(rng: &mut Rng) -> Vec3 {
     }
 }
 
+fn query(origin: Vec3, dir: Vec3, t_max: f32) -> rendiff::shade::ShadowQuery {
+    rendiff::shade::ShadowQuery {
+        light: 0,
+        origin,
+        dir,
+        t_max,
+        normal: dir,
+    }
+}
+
 /// Closest hits and shadow transmittance of a BVH equal those of a flat
 /// loop over all triangles (the brute force): same triangle, same `t` bits.
 fn assert_bvh_matches_brute_force(t: &TriScene, rays: usize, seed: u64) {
@@ -105,8 +115,8 @@ fn assert_bvh_matches_brute_force(t: &TriScene, rays: usize, seed: u64) {
         hits += usize::from(x.is_some());
         let tmax = rng.rangef(0.0, 3.0) * r;
         assert_eq!(
-            sb.transmittance(0, o, dir, tmax),
-            sf.transmittance(0, o, dir, tmax),
+            sb.transmittance(&query(o, dir, tmax)),
+            sf.transmittance(&query(o, dir, tmax)),
             "seed {seed}, shadow ray {k}"
         );
     }
