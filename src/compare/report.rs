@@ -236,7 +236,7 @@ pub fn scene_html(r: &Report, images: &[(&str, &str)]) -> String {
     let mut o = String::new();
     let _ = write!(
         o,
-        "<!doctype html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>rendiff: {}</title>\n{STYLE}</head><body>\n",
+        "<!doctype html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>rendiff: {}</title>\n{STYLE}{LOAD_CHECK}</head><body>\n",
         esc(&r.scene)
     );
     let _ = writeln!(
@@ -257,10 +257,17 @@ pub fn scene_html(r: &Report, images: &[(&str, &str)]) -> String {
         r.max_depth
     );
     o.push_str("<div class=\"images\">\n");
+    // Small renders are shown enlarged (pixelated), so single samples show.
+    let zoom = (480 / r.width.max(1)).clamp(1, 4);
     for (label, file) in images {
+        let z = if file.starts_with("composite") {
+            1
+        } else {
+            zoom
+        };
         let _ = writeln!(
             o,
-            "<figure><img src=\"{}\" alt=\"{}\"><figcaption>{}</figcaption></figure>",
+            "<figure><img src=\"{}\" alt=\"{}\" style=\"zoom:{z}\"><figcaption>{}</figcaption></figure>",
             esc(file),
             esc(label),
             esc(label)
@@ -279,7 +286,7 @@ pub fn index_html(entries: &[(Report, String)]) -> String {
     let pass = entries.iter().filter(|(r, _)| r.passed()).count();
     let _ = write!(
         o,
-        "<!doctype html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>rendiff report</title>\n{STYLE}</head><body>\n<h1>rendiff: {pass} of {} scenes pass</h1>\n<table>\n<tr><th>scene</th><th>a / b</th><th>verdict</th><th>real</th><th>shading max</th><th>8-bit max</th><th>composite</th></tr>\n",
+        "<!doctype html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>rendiff report</title>\n{STYLE}{LOAD_CHECK}</head><body>\n<h1>rendiff: {pass} of {} scenes pass</h1>\n<table>\n<tr><th>scene</th><th>a / b</th><th>verdict</th><th>real</th><th>shading max</th><th>8-bit max</th><th>composite</th></tr>\n",
         entries.len()
     );
     for (r, dir) in entries {
@@ -303,6 +310,10 @@ pub fn index_html(entries: &[(Report, String)]) -> String {
     o.push_str("</table>\n</body></html>\n");
     o
 }
+
+/// Marks the page once loaded with how many of its images decoded
+/// (`<body data-images="5/5">`), for headless checks of the report.
+const LOAD_CHECK: &str = "<script>window.addEventListener('load',function(){var im=Array.prototype.slice.call(document.images);var ok=im.filter(function(i){return i.complete&&i.naturalWidth>0;}).length;document.body.setAttribute('data-images',ok+'/'+im.length);});</script>\n";
 
 const STYLE: &str = "<style>body{font-family:sans-serif;background:#1e1e22;color:#ddd;margin:2em}\
 h1{font-weight:normal}.pass{color:#5c5}.fail{color:#f55}figure{display:inline-block;margin:0 1em 1em 0}\

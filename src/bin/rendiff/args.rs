@@ -68,7 +68,8 @@ pub struct RenderFlags {
     /// Write 16-bit linear PNGs (with a gAMA chunk of 1.0) instead of 8-bit sRGB.
     #[arg(long)]
     pub linear16: bool,
-    /// Also write the G-buffer (depth.pfm, id.png, flags.png) into DIR.
+    /// Also write the G-buffer (depth.pfm, id.png, flags.png) into DIR
+    /// (for diff: DIR/a and DIR/b).
     #[arg(long, value_name = "DIR")]
     pub gbuffer: Option<PathBuf>,
     /// Rasterizer depth buffer format: f32, u24 or u16.

@@ -44,6 +44,18 @@ fn diff(a: &DiffArgs) -> Result<Outcome> {
     let mut entries = Vec::new();
     for (label, job) in &jobs {
         let r = diff::diff(job, label, &side_a, &side_b)?;
+        if let Some(gb) = &a.flags.gbuffer {
+            let base = if several {
+                gb.join(job.scene.name())
+            } else {
+                gb.clone()
+            };
+            for (side, out) in [("a", &r.a), ("b", &r.b)] {
+                if let diff::Output::Frame(f, _) = out {
+                    f.write_gbuffer(&base.join(side))?;
+                }
+            }
+        }
         if let Some(dir) = &a.out {
             let sub = if several {
                 job.scene.name()

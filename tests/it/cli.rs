@@ -1,0 +1,278 @@
+//! The command line: help texts, outputs, exit codes, the HTML report in
+//! a headless browser.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use crate::util::root;
+
+fn rendiff(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_rendiff"))
+        .args(args)
+        .current_dir(root())
+        .env("RUST_BACKTRACE", "1")
+        .output()
+        .expect("could not run rendiff")
+}
+
+fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn temp(name: &str) -> PathBuf {
+    let d = Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join("cli")
+        .join(name);
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+#[test]
+fn help_texts() {
+    for args in [
+        &["--help"][..],
+        &["render", "--help"],
+        &["diff", "--help"],
+        &["plan", "--help"],
+    ] {
+        let o = rendiff(args);
+        assert!(o.status.success(), "{args:?}");
+        insta::assert_snapshot!(
+            format!("help_{}", args.join("_").replace("--", "")),
+            stdout(&o)
+        );
+    }
+}
+
+#[test]
+fn render_writes_the_image_and_the_gbuffer() {
+    let dir = temp("render");
+    let out = dir.join("spheres.png");
+    let gb = dir.join("gb");
+    let o = rendiff(&[
+        "render",
+        "scenes/spheres.toml",
+        "--backend",
+        "raster",
+        "--size",
+        "64x48",
+        "--samples",
+        "2",
+        "-o",
+        out.to_str().unwrap(),
+        "--gbuffer",
+        gb.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let img = rendiff::image_io::read_png_linear(&out).unwrap();
+    assert_eq!((img.width, img.height, img.linear16), (64, 48, false));
+    // The G-buffer is at the sample resolution.
+    let id = rendiff::image_io::read_png_linear(&gb.join("id.png")).unwrap();
+    assert_eq!((id.width, id.height), (128, 96));
+    let pfm = std::fs::read(gb.join("depth.pfm")).unwrap();
+    assert!(pfm.starts_with(b"Pf\n128 96\n-1.0\n"));
+    assert_eq!(pfm.len(), b"Pf\n128 96\n-1.0\n".len() + 128 * 96 * 4);
+    assert!(gb.join("flags.png").exists());
+    // 16-bit linear on request.
+    let o = rendiff(&[
+        "render",
+        "scenes/spheres.toml",
+        "--size",
+        "32x24",
+        "--linear16",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success());
+    assert!(rendiff::image_io::read_png_linear(&out).unwrap().linear16);
+}
+
+#[test]
+fn diff_exit_status_follows_the_verdict() {
+    let dir = temp("diff");
+    // Raster against ray: within tolerance.
+    let o = rendiff(&["diff", "scenes/spheres.toml", "--size", "80x60"]);
+    assert_eq!(o.status.code(), Some(0), "{}{}", stdout(&o), stderr(&o));
+    assert!(stdout(&o).contains("verdict: pass"));
+    // The ray tracer against an image of another scene: outside tolerance.
+    let other = dir.join("bunny.png");
+    let o = rendiff(&[
+        "render",
+        "scenes/bunny.toml",
+        "--size",
+        "80x60",
+        "--linear16",
+        "-o",
+        other.to_str().unwrap(),
+    ]);
+    assert!(o.status.success());
+    let o = rendiff(&[
+        "diff",
+        "scenes/spheres.toml",
+        "--size",
+        "80x60",
+        "--a",
+        "ray",
+        "--b",
+        other.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(1), "{}{}", stdout(&o), stderr(&o));
+    assert!(stdout(&o).contains("verdict: fail"));
+    // An image of the wrong size is bad input.
+    let o = rendiff(&[
+        "diff",
+        "scenes/spheres.toml",
+        "--size",
+        "81x60",
+        "--a",
+        "ray",
+        "--b",
+        other.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("80x60"), "{}", stderr(&o));
+}
+
+#[test]
+fn diff_json_is_one_object_or_an_array() {
+    let o = rendiff(&["diff", "scenes/spheres.toml", "--size", "40x30", "--json"]);
+    assert!(o.status.success());
+    let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    assert_eq!(v["verdict"], "pass");
+    assert_eq!(v["samples"], 1200);
+    let o = rendiff(&[
+        "diff",
+        "scenes/spheres.toml",
+        "scenes/bunny.toml",
+        "--size",
+        "40x30",
+        "--json",
+    ]);
+    assert!(o.status.success());
+    let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    assert_eq!(v.as_array().map(Vec::len), Some(2));
+}
+
+#[test]
+fn usage_errors_exit_with_2_and_say_what_was_expected() {
+    let cases: &[(&[&str], &str)] = &[
+        (
+            &["render", "scenes/spheres.toml", "--backend", "gpu"],
+            "expected raster or ray",
+        ),
+        (
+            &["render", "scenes/spheres.toml", "--size", "0x10"],
+            "each side must be 1",
+        ),
+        (
+            &["render", "scenes/spheres.toml", "--samples", "3"],
+            "expected 1, 2, 4, 8 or 16",
+        ),
+        (
+            &["render", "scenes/spheres.toml", "--depth", "f16"],
+            "--depth",
+        ),
+        (
+            &["render", "scenes/spheres.toml", "--threads", "0"],
+            "--threads",
+        ),
+        (
+            &["render", "scenes/spheres.toml", "-o", "no/such/dir/x.png"],
+            "does not exist",
+        ),
+        (&["diff", "scenes/spheres.toml", "--b", "nope"], "--b"),
+        (&["render", "scenes/nosuch.toml"], "could not read"),
+    ];
+    let mut text = String::new();
+    for (args, want) in cases {
+        let o = rendiff(args);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {}", stderr(&o));
+        let e = stderr(&o);
+        assert!(e.contains(want), "{args:?}: {e}");
+        assert!(!e.contains("panicked"), "{args:?}");
+        text.push_str(&format!("$ rendiff {}\n{e}\n", args.join(" ")));
+    }
+    insta::assert_snapshot!("usage_errors", text);
+}
+
+/// Finds a headless browser: Debian's chromium.
+fn chromium() -> Option<PathBuf> {
+    ["chromium", "chromium-browser", "google-chrome"]
+        .iter()
+        .find_map(|name| {
+            let o = Command::new("which").arg(name).output().ok()?;
+            o.status
+                .success()
+                .then(|| PathBuf::from(String::from_utf8_lossy(&o.stdout).trim()))
+        })
+}
+
+/// The HTML report of several scenes, opened in headless Chromium: the
+/// index and every scene page load and show every image. (Runs where
+/// Chromium is installed; `.ci/run` installs it and sets
+/// RENDIFF_REQUIRE_CHROMIUM=1 so CI cannot skip it.)
+#[test]
+fn html_report_loads_in_a_headless_browser() {
+    let Some(browser) = chromium() else {
+        assert!(
+            std::env::var("RENDIFF_REQUIRE_CHROMIUM").is_err(),
+            "chromium is required but not installed"
+        );
+        eprintln!("skipped: chromium is not installed");
+        return;
+    };
+    let dir = temp("report");
+    let o = rendiff(&[
+        "diff",
+        "scenes/spheres.toml",
+        "scenes/polygons.toml",
+        "--size",
+        "96x72",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let pages = [
+        dir.join("index.html"),
+        dir.join("spheres/index.html"),
+        dir.join("polygons/index.html"),
+    ];
+    for page in &pages {
+        assert!(page.exists(), "{}", page.display());
+        let o = Command::new(&browser)
+            .args([
+                "--headless",
+                "--no-sandbox",
+                "--disable-gpu",
+                "--disable-background-networking",
+                "--disable-component-update",
+                "--disable-sync",
+                "--no-first-run",
+                "--allow-file-access-from-files",
+                &format!("--user-data-dir={}", temp("chromium-profile").display()),
+                "--virtual-time-budget=5000",
+                "--dump-dom",
+                &format!("file://{}", page.display()),
+            ])
+            .output()
+            .expect("chromium runs");
+        let dom = stdout(&o);
+        let marker = dom
+            .split("data-images=\"")
+            .nth(1)
+            .and_then(|r| r.split('"').next())
+            .unwrap_or("");
+        let (ok, all) = marker.split_once('/').unwrap_or(("0", "?"));
+        assert!(
+            all != "0" && ok == all,
+            "{}: images loaded {marker:?}\n{}",
+            page.display(),
+            stderr(&o)
+        );
+    }
+}
