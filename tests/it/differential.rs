@@ -166,3 +166,29 @@ fn json_verdict_has_the_documented_fields() {
     assert_eq!(v["verdict"], "pass");
     assert_eq!(v["samples"], 320 * 240);
 }
+
+/// A scene's `[tolerance]` table may tighten the derived tolerances, never
+/// loosen them: a looser value is an error naming the key.
+#[test]
+fn tolerance_table_may_only_tighten() {
+    let base = std::fs::read_to_string(crate::util::scene_path("spheres")).unwrap();
+    let path = crate::util::scene_path("inline");
+    let load = |extra: &str| {
+        let scene =
+            rendiff::scene::Scene::from_str(&path, &format!("{base}\n[tolerance]\n{extra}\n"))
+                .unwrap();
+        let job = rendiff::Prepared::from_scene(scene, &Overrides::default()).unwrap();
+        diff::tolerances(&job).map(|(t, i)| (t.shading_max, i.pov_max8))
+    };
+    let derived = load("").unwrap();
+    assert_eq!(load("shading_max = 1e-9").unwrap().0, 1e-9);
+    assert_eq!(load("pov_max8 = 1").unwrap().1, 1.0);
+    let e = load("shading_max = 0.5").unwrap_err().to_string();
+    assert!(
+        e.contains("tolerance.shading_max") && e.contains("looser"),
+        "{e}"
+    );
+    assert!(e.contains(&format!("{}:", path.display())), "{e}");
+    assert!(load("pov_fraction = 0.5").is_err());
+    assert!(derived.0 > 1e-9);
+}
