@@ -19,6 +19,13 @@ pub enum Side {
     Backend(Backend),
     /// A stored image (read as linear when 16-bit with gAMA 1.0, else sRGB).
     Image(PathBuf),
+    /// The POV-Ray reference: stored in the golden folder, or rendered now.
+    Pov {
+        /// The folder of the stored references (`golden/pov`).
+        golden_dir: PathBuf,
+        /// Render it with POV-Ray instead of reading the stored one.
+        render: bool,
+    },
 }
 
 impl Side {
@@ -31,18 +38,27 @@ impl Side {
         if s.contains('.') || s.contains('/') {
             return Ok(Side::Image(PathBuf::from(s)));
         }
-        s.parse::<Backend>().map(Side::Backend)
+        if s == "pov" {
+            return Ok(Side::Pov {
+                golden_dir: PathBuf::from("golden/pov"),
+                render: false,
+            });
+        }
+        s.parse::<Backend>().map(Side::Backend).map_err(|_| {
+            format!("unknown side \"{s}\"; expected a backend (raster, ray), pov, or a PATH.png")
+        })
     }
 
     fn label(&self) -> String {
         match self {
             Side::Backend(b) => b.to_string(),
             Side::Image(p) => p.display().to_string(),
+            Side::Pov { .. } => "pov".to_string(),
         }
     }
 
     fn traces_ray_tree(&self) -> bool {
-        matches!(self, Side::Backend(Backend::Ray))
+        matches!(self, Side::Backend(Backend::Ray) | Side::Pov { .. })
     }
 }
 
@@ -67,6 +83,13 @@ impl Output {
         match self {
             Output::Frame(f, _) => &f.color,
             Output::Image { pixels, .. } => pixels,
+        }
+    }
+
+    fn frame(&self) -> Option<&Frame> {
+        match self {
+            Output::Frame(f, _) => Some(f),
+            Output::Image { .. } => None,
         }
     }
 
@@ -155,6 +178,48 @@ pub fn tolerances(job: &Prepared) -> Result<(Tolerances, ImageTolerances), Error
 
 fn produce(job: &Prepared, side: &Side, max_depth: u32) -> Result<Output, Error> {
     match side {
+        Side::Pov { golden_dir, render } => {
+            use crate::pov::golden::{self, Variant};
+            let variant = if max_depth == 1 && job.tri.max_depth > 1 {
+                Variant::Depth1
+            } else {
+                Variant::Main
+            };
+            let img = if *render {
+                golden::povray_version().map_err(|e| Error::Usage(e.to_string()))?;
+                let refs = golden::references(&job.scene, &job.tri)
+                    .map_err(|e| Error::Usage(e.to_string()))?;
+                let r = refs
+                    .iter()
+                    .find(|r| r.variant == variant)
+                    .or_else(|| refs.first())
+                    .ok_or_else(|| Error::Usage("no POV-Ray reference for this scene".into()))?;
+                let work = std::env::temp_dir().join(format!("rendiff-pov-{}", std::process::id()));
+                std::fs::create_dir_all(&work).map_err(|source| image_io::ImageIoError::Io {
+                    path: work.clone(),
+                    source,
+                })?;
+                let img =
+                    golden::render(&job.scene, r, &work).map_err(|e| Error::Usage(e.to_string()));
+                let _ = std::fs::remove_dir_all(&work);
+                img?
+            } else {
+                let path = golden::reference_path(golden_dir, &job.scene, variant);
+                if !path.exists() {
+                    return Err(Error::Usage(format!(
+                        "{}: no stored POV-Ray reference; render one with `rendiff golden --update {}` or pass --render",
+                        path.display(),
+                        job.scene.path.display()
+                    )));
+                }
+                image_io::read_png_linear(&path)?
+            };
+            Ok(Output::Image {
+                width: img.width,
+                height: img.height,
+                pixels: img.pixels,
+            })
+        }
         Side::Backend(b) => {
             let r = job.render_with_depth(*b, max_depth);
             Ok(Output::Frame(r.frame, r.time_ms))
@@ -190,11 +255,12 @@ pub fn diff(job: &Prepared, scene_label: &str, a: &Side, b: &Side) -> Result<Dif
     let (tol, image_tol) = tolerances(job)?;
     let mut notes = Vec::new();
     let mut max_depth = job.settings.max_depth;
-    let backends = [a, b]
+    // Sides that render (a backend, or POV-Ray's reference at either depth).
+    let renderers = [a, b]
         .iter()
-        .filter(|s| matches!(s, Side::Backend(_)))
+        .filter(|s| matches!(s, Side::Backend(_) | Side::Pov { .. }))
         .count();
-    if backends == 2
+    if renderers == 2
         && !(a.traces_ray_tree() && b.traces_ray_tree())
         && max_depth > 1
         && job.plan.ray_tree
@@ -229,7 +295,7 @@ pub fn diff(job: &Prepared, scene_label: &str, a: &Side, b: &Side) -> Result<Dif
             Some(image_tol),
         ),
     };
-    let report = Report::new(
+    let mut report = Report::new(
         scene_label,
         (cam.width(), cam.height()),
         (&a.label(), &b.label()),
@@ -243,6 +309,25 @@ pub fn diff(job: &Prepared, scene_label: &str, a: &Side, b: &Side) -> Result<Dif
         },
         notes,
     );
+    // A frame against an image: explain the pixels beyond the bound.
+    if let (Some(frame), None) | (None, Some(frame)) = (out_a.frame(), out_b.frame()) {
+        let reference = if out_a.frame().is_some() {
+            out_b.pixels()
+        } else {
+            out_a.pixels()
+        };
+        let accel = crate::accel::Accel::new(&job.tri, crate::accel::AccelOptions::default());
+        let oracle =
+            crate::compare::Oracle::new(&job.tri, tol.edge_px, tol.near_eps, job.settings.depth);
+        #[expect(
+            clippy::cast_possible_truncation,
+            clippy::cast_sign_loss,
+            reason = "an 8-bit bound"
+        )]
+        let max8 = image_tol.pov_max8.clamp(0.0, 255.0) as u8;
+        let (counts, _) = crate::compare::explain::explain(frame, reference, &accel, &oracle, max8);
+        report.explained = Some(counts);
+    }
     Ok(DiffResult {
         report,
         comparison,

@@ -36,6 +36,7 @@ pub mod math;
 pub mod options;
 pub mod plan;
 pub mod polygon;
+pub mod pov;
 pub mod raster;
 pub mod ray;
 pub mod scene;

@@ -169,6 +169,17 @@ impl<'s> Accel<'s> {
         best
     }
 
+    /// Calls `visit(triangle, hit)` for every triangle hit in
+    /// `[ray.t_min, ray.t_max]` (analytic spheres excluded), in no particular
+    /// order; stops when `visit` returns `true`.
+    pub fn for_each_triangle_hit(
+        &self,
+        ray: &Ray,
+        visit: impl FnMut(u32, triangle::TriHit) -> bool,
+    ) {
+        self.bvh.for_each_hit(ray, visit);
+    }
+
     /// `true` when some primitive casts shadows.
     #[must_use]
     pub fn has_casters(&self) -> bool {

@@ -7,6 +7,7 @@
 //! Where they agree, the colour difference is the shading error; samples
 //! whose shading flags say they sit on a discontinuity are shading ties.
 
+pub mod explain;
 pub mod maps;
 pub mod metrics;
 pub mod oracle;

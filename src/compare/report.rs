@@ -65,6 +65,9 @@ pub struct Report {
     pub verdict: String,
     /// Remarks, e.g. a forced max_depth.
     pub notes: Vec<String>,
+    /// For a frame against an image: why the pixels beyond the 8-bit bound differ.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub explained: Option<super::explain::Explained>,
 }
 
 impl Report {
@@ -104,6 +107,7 @@ impl Report {
             time_ms,
             verdict: if cmp.pass { "pass" } else { "fail" }.to_string(),
             notes,
+            explained: None,
         }
     }
 
@@ -156,6 +160,19 @@ impl Report {
             "  image: max 8-bit difference {}, {} pixels differ, SSIM {:.5}",
             self.image.max_channel_8bit, self.image.differing_pixels, self.image.ssim
         );
+        if let Some(e) = &self.explained {
+            let _ = writeln!(
+                o,
+                "  beyond the 8-bit bound: {} pixels: {} at edges, {} depth ties, {} shadow boundaries or gates, {} before the near plane, {} in the ray tree, {} unexplained",
+                e.differing,
+                e.edge,
+                e.depth_tie,
+                e.shadow_or_gate,
+                e.near_plane,
+                e.ray_tree,
+                e.unexplained
+            );
+        }
         let t = &self.tolerance;
         let _ = write!(
             o,

@@ -59,8 +59,24 @@ const ALLOWED: &[(&str, &[&str])] = &[
         ],
     ),
     (
+        "pov",
+        &[
+            "camera",
+            "color",
+            "image_io",
+            "math",
+            "options",
+            "scene",
+            "shade",
+            "texture",
+            "tri_scene",
+        ],
+    ),
+    (
         "diff",
-        &["facade", "color", "compare", "frame", "image_io", "scene"],
+        &[
+            "facade", "accel", "color", "compare", "frame", "image_io", "pov", "scene",
+        ],
     ),
 ];
 

@@ -10,6 +10,8 @@ mod cli;
 mod differential;
 /// Regression images per backend (golden/raster, golden/ray).
 mod golden;
+/// Both backends against the stored POV-Ray references.
+mod povray;
 /// The rasterizer: exact coverage, drift, depth formats, near clipping.
 mod raster;
 /// The ray tracer: BVH, watertightness, self-hits, threads, shading.

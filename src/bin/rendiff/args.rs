@@ -28,6 +28,46 @@ pub enum Command {
     Diff(DiffArgs),
     /// Print what a scene contains and what the render plan decides.
     Plan(PlanArgs),
+    /// Write the POV-Ray 3.7 scene that renders the same picture.
+    Pov(PovArgs),
+    /// Check the stored POV-Ray references (or re-render them with --update).
+    ///
+    /// Without --update, renders every reference again into a temporary
+    /// folder and reports whether the stored ones are still what POV-Ray
+    /// produces (exit 1 when one is stale or differs).
+    Golden(GoldenArgs),
+}
+
+/// `rendiff pov`.
+#[derive(Debug, Args)]
+pub struct PovArgs {
+    /// The scene file (.toml).
+    pub scene: PathBuf,
+    /// Output .pov (default: standard output).
+    #[arg(short = 'o', long = "output", value_name = "OUT.pov")]
+    pub output: Option<PathBuf>,
+    /// mesh (the triangles the backends see) or analytic (POV-Ray primitives).
+    #[arg(long, default_value = "mesh", value_name = "KIND")]
+    pub geometry: String,
+    /// Image size, overriding the scene's [image] (e.g. 640x480).
+    #[arg(long, value_name = "WxH", value_parser = parse_size)]
+    pub size: Option<(u32, u32)>,
+    /// POV-Ray's max_trace_level (default: the scene's max_depth).
+    #[arg(long, value_name = "N")]
+    pub max_depth: Option<u32>,
+}
+
+/// `rendiff golden`.
+#[derive(Debug, Args)]
+pub struct GoldenArgs {
+    /// Scene files (default: every scenes/*.toml).
+    pub scenes: Vec<PathBuf>,
+    /// Render the references and store them (only the scenes given).
+    #[arg(long)]
+    pub update: bool,
+    /// Folder of the references.
+    #[arg(long = "golden", default_value = "golden/pov", value_name = "DIR")]
+    pub golden_dir: PathBuf,
 }
 
 /// `rendiff diff`.
@@ -39,9 +79,16 @@ pub struct DiffArgs {
     /// Side a: a backend (raster, ray).
     #[arg(long = "a", default_value = "raster", value_name = "BACKEND")]
     pub a: String,
-    /// Side b: a backend, or PATH.png (any argument with '.' or '/').
-    #[arg(long = "b", default_value = "ray", value_name = "BACKEND|PATH.png")]
+    /// Side b: a backend, pov (the POV-Ray reference), or PATH.png (any
+    /// argument with '.' or '/').
+    #[arg(long = "b", default_value = "ray", value_name = "BACKEND|pov|PATH.png")]
     pub b: String,
+    /// With --b pov: render the POV-Ray reference now instead of reading the stored one.
+    #[arg(long)]
+    pub render: bool,
+    /// Folder of the stored POV-Ray references (for --b pov).
+    #[arg(long = "golden", default_value = "golden/pov", value_name = "DIR")]
+    pub golden_dir: PathBuf,
     /// Print the JSON verdict (one object per scene; an array for several).
     #[arg(long)]
     pub json: bool,

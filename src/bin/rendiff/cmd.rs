@@ -10,7 +10,19 @@ use rendiff::shade::{LightKind, Pigment};
 use rendiff::{Backend, Overrides, Prepared};
 
 use crate::Outcome;
-use crate::args::{Cli, Command, DiffArgs, PlanArgs, RenderArgs, RenderFlags};
+use crate::args::{Cli, Command, DiffArgs, GoldenArgs, PlanArgs, PovArgs, RenderArgs, RenderFlags};
+
+/// Writes to standard output; a closed pipe (`rendiff pov x | head`) ends
+/// the program quietly with success, as grep and ripgrep do.
+pub fn say(text: &str) {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    if let Err(e) = out.write_all(text.as_bytes()).and_then(|()| out.flush())
+        && e.kind() == std::io::ErrorKind::BrokenPipe
+    {
+        std::process::exit(0);
+    }
+}
 
 /// Runs a parsed command line.
 pub fn run(cli: Cli) -> Result<Outcome> {
@@ -18,14 +30,176 @@ pub fn run(cli: Cli) -> Result<Outcome> {
         Command::Render(a) => with_threads(a.flags.threads, || render(&a)),
         Command::Diff(a) => with_threads(a.flags.threads, || diff(&a)),
         Command::Plan(a) => plan(&a),
+        Command::Pov(a) => pov(&a),
+        Command::Golden(a) => golden(&a),
     }
+}
+
+fn pov(a: &PovArgs) -> Result<Outcome> {
+    use rendiff::pov::{ExportOptions, export};
+    let geometry: Geometry = a
+        .geometry
+        .parse()
+        .map_err(|e| anyhow::anyhow!("--geometry: {e}"))?;
+    let ov = Overrides {
+        size: a.size,
+        max_depth: a.max_depth,
+        ..Overrides::default()
+    };
+    let job = Prepared::load(&a.scene, &ov)?;
+    let e = export(
+        &job.scene,
+        &job.tri,
+        &ExportOptions {
+            geometry,
+            max_depth: job.settings.max_depth,
+            abridged: false,
+        },
+    );
+    match &a.output {
+        Some(out) => {
+            check_output_dir(out)?;
+            let dir = out
+                .parent()
+                .filter(|p| !p.as_os_str().is_empty())
+                .unwrap_or(Path::new("."));
+            for img in &e.images {
+                img.materialise(dir)?;
+            }
+            rendiff::image_io::write_atomic(out, |f| {
+                std::io::Write::write_all(f, e.text.as_bytes())
+            })?;
+        }
+        None => say(&e.text),
+    }
+    Ok(Outcome::Ok)
+}
+
+/// The scenes to work on: those given, or every scenes/*.toml.
+fn scene_list(given: &[PathBuf]) -> Result<Vec<PathBuf>> {
+    if !given.is_empty() {
+        return Ok(given.to_vec());
+    }
+    let mut v: Vec<PathBuf> = std::fs::read_dir("scenes")
+        .context("no scenes given and no scenes/ folder here")?
+        .filter_map(Result::ok)
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+        .collect();
+    v.sort();
+    Ok(v)
+}
+
+fn golden(a: &GoldenArgs) -> Result<Outcome> {
+    use rendiff::pov::golden;
+    let version = golden::povray_version()?;
+    let scenes = scene_list(&a.scenes)?;
+    // Load every scene first: bad input fails before any rendering.
+    let jobs: Vec<Prepared> = scenes
+        .iter()
+        .map(|p| Prepared::load(p, &Overrides::default()))
+        .collect::<Result<_, _>>()?;
+    let work = std::env::temp_dir().join(format!("rendiff-golden-{}", std::process::id()));
+    std::fs::create_dir_all(&work)
+        .with_context(|| format!("could not create {}", work.display()))?;
+    let progress = progress_bar(jobs.len());
+    let mut outcome = Outcome::Ok;
+    let result = (|| -> Result<()> {
+        for job in &jobs {
+            progress.set_message(job.scene.name());
+            let rendered = golden::render_all(&job.scene, &job.tri, &a.golden_dir, &work)?;
+            if a.update {
+                golden::store(&job.scene, &version, &rendered, &a.golden_dir)?;
+                note(
+                    &progress,
+                    format!(
+                        "{}: {} reference(s) written",
+                        job.scene.path.display(),
+                        rendered.len()
+                    ),
+                );
+            } else {
+                let mut problems = golden::stale(&job.scene, &job.tri, &a.golden_dir)?;
+                for (_, img, path) in &rendered {
+                    match rendiff::image_io::read_png_linear(path) {
+                        Ok(stored) => match golden::max_code_difference(&stored, img) {
+                            Some(0) => {}
+                            Some(d) => problems.push(format!(
+                                "{}: POV-Ray now renders it differently (up to {d}/65535)",
+                                path.display()
+                            )),
+                            None => problems
+                                .push(format!("{}: POV-Ray renders another size", path.display())),
+                        },
+                        Err(_) => {
+                            problems.push(format!("{}: missing or unreadable", path.display()))
+                        }
+                    }
+                }
+                if problems.is_empty() {
+                    note(
+                        &progress,
+                        format!(
+                            "{}: {} reference(s) reproduced exactly",
+                            job.scene.path.display(),
+                            rendered.len()
+                        ),
+                    );
+                } else {
+                    outcome = Outcome::Differs;
+                    for p in problems {
+                        note(&progress, format!("{}: {p}", job.scene.path.display()));
+                    }
+                }
+            }
+            progress.inc(1);
+        }
+        Ok(())
+    })();
+    progress.finish_and_clear();
+    let _ = std::fs::remove_dir_all(&work);
+    result?;
+    if matches!(outcome, Outcome::Differs) {
+        eprintln!(
+            "some references are stale or no longer reproduced; run `make golden` (rendiff golden --update) after checking why"
+        );
+    }
+    Ok(outcome)
+}
+
+/// A line of output above the progress bar (or plain, without one).
+fn note(bar: &indicatif::ProgressBar, line: String) {
+    if bar.is_hidden() {
+        say(&format!("{line}\n"));
+    } else {
+        bar.println(line);
+    }
+}
+
+/// A progress bar on a terminal, nothing otherwise.
+fn progress_bar(len: usize) -> indicatif::ProgressBar {
+    use std::io::IsTerminal;
+    if !std::io::stderr().is_terminal() {
+        return indicatif::ProgressBar::hidden();
+    }
+    let bar = indicatif::ProgressBar::new(u64::try_from(len).unwrap_or(u64::MAX));
+    if let Ok(style) = indicatif::ProgressStyle::with_template("{bar:30} {pos}/{len} {msg}") {
+        bar.set_style(style);
+    }
+    bar
 }
 
 fn diff(a: &DiffArgs) -> Result<Outcome> {
     use rendiff::compare::report::index_html;
     use rendiff::diff::{self, Side};
     let side_a = Side::parse(&a.a).map_err(|e| anyhow::anyhow!("--a: {e}"))?;
-    let side_b = Side::parse(&a.b).map_err(|e| anyhow::anyhow!("--b: {e}"))?;
+    let side_b = match Side::parse(&a.b).map_err(|e| anyhow::anyhow!("--b: {e}"))? {
+        Side::Pov { .. } => Side::Pov {
+            golden_dir: a.golden_dir.clone(),
+            render: a.render,
+        },
+        other => other,
+    };
     let ov = overrides(&a.flags)?;
     if let Some(dir) = &a.out
         && dir.exists()
@@ -67,7 +241,7 @@ fn diff(a: &DiffArgs) -> Result<Outcome> {
             entries.push((r.report.clone(), sub));
         }
         if !a.json {
-            print!("{}", r.report.summary());
+            say(&r.report.summary());
         }
         reports.push(r.report);
     }
@@ -83,7 +257,7 @@ fn diff(a: &DiffArgs) -> Result<Outcome> {
         } else {
             serde_json::to_string_pretty(&reports[0])?
         };
-        println!("{text}");
+        say(&format!("{text}\n"));
     }
     Ok(
         if reports.iter().all(rendiff::compare::report::Report::passed) {
@@ -172,8 +346,8 @@ fn render(a: &RenderArgs) -> Result<Outcome> {
     if let Some(dir) = &a.flags.gbuffer {
         r.frame.write_gbuffer(dir)?;
     }
-    println!(
-        "{}: {} {}x{} ({} sample{}/pixel) in {:.1} ms -> {}",
+    say(&format!(
+        "{}: {} {}x{} ({} sample{}/pixel) in {:.1} ms -> {}\n",
         a.scene.display(),
         backend,
         r.frame.width,
@@ -182,7 +356,7 @@ fn render(a: &RenderArgs) -> Result<Outcome> {
         if r.frame.samples == 1 { "" } else { "s" },
         r.time_ms,
         out.display()
-    );
+    ));
     Ok(Outcome::Ok)
 }
 
@@ -206,7 +380,7 @@ fn plan(a: &PlanArgs) -> Result<Outcome> {
         ..Overrides::default()
     };
     let job = Prepared::load(&a.scene, &ov)?;
-    print!("{}", describe(&job));
+    say(&describe(&job));
     Ok(Outcome::Ok)
 }
 

@@ -1,0 +1,206 @@
+//! Why a rendered pixel differs from a reference image (POV-Ray, or any
+//! image rendered from the same scene): the causes that are not errors,
+//! found from the frame's own G-buffer and exact ray queries.
+//!
+//! A pixel is explained when one of its samples lies
+//! * at an **edge**: within ε_edge of an edge of its visible triangle, or
+//!   next to a sample that sees another object or the background (a
+//!   silhouette, where another renderer's intersection test may decide the
+//!   other way);
+//! * on a **depth tie**: a second surface lies within the depth tolerance
+//!   along its primary ray (coincident surfaces, which each renderer breaks
+//!   its own way);
+//! * on a **shadow boundary**: an 8-neighbour has another shadow bit (each
+//!   renderer's shadow-ray epsilon moves the boundary by a fraction of a
+//!   sample), or the sample is flagged as a shading discontinuity;
+//! * **before the near plane**: its primary ray meets geometry nearer than
+//!   `near`, which the backends ignore and POV-Ray renders;
+//! * **in the ray tree**: its visible surface reflects or transmits and the
+//!   primary sample is none of the above, so the difference arises along a
+//!   secondary ray (which meets edges, shadow boundaries and critical angles
+//!   at positions no sample grid controls). Counted apart: a comparison can
+//!   bound it.
+//!
+//! Anything else is unexplained.
+
+use serde::Serialize;
+
+use super::oracle::Oracle;
+use crate::accel::Accel;
+use crate::frame::{BACKGROUND, Frame};
+use crate::math::Ray;
+use crate::shade::FLAG_DISCONTINUITY;
+
+/// Why a pixel differs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]
+pub enum Explanation {
+    /// Geometry nearer than the near plane.
+    NearPlane,
+    /// Coincident surfaces.
+    DepthTie,
+    /// A triangle edge or silhouette.
+    Edge,
+    /// A shadow boundary or shading discontinuity.
+    ShadowOrGate,
+    /// Along a secondary ray of a reflecting or transmitting surface.
+    RayTree,
+    /// Nothing above.
+    Unexplained,
+}
+
+/// Counts of the explanations of the differing pixels.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct Explained {
+    /// Pixels that differ by more than the threshold.
+    pub differing: u64,
+    /// At the near plane.
+    pub near_plane: u64,
+    /// Depth ties.
+    pub depth_tie: u64,
+    /// Edges and silhouettes.
+    pub edge: u64,
+    /// Shadow boundaries and gates.
+    pub shadow_or_gate: u64,
+    /// Secondary rays of reflecting or transmitting surfaces.
+    pub ray_tree: u64,
+    /// The rest.
+    pub unexplained: u64,
+}
+
+/// Explains one pixel of `frame`.
+#[must_use]
+pub fn explain_pixel(
+    frame: &Frame,
+    accel: &Accel<'_>,
+    oracle: &Oracle<'_>,
+    x: u32,
+    y: u32,
+) -> Explanation {
+    let scene = accel.scene();
+    let cam = &scene.camera;
+    let n = frame.samples;
+    let (sw, sh) = (frame.sample_width(), frame.sample_height());
+    let mut best = Explanation::Unexplained;
+    for b in 0..n {
+        for a in 0..n {
+            let (sx, sy) = (x * n + a, y * n + b);
+            let i = (sy * sw + sx) as usize;
+            let id = frame.id[i];
+            let (px, py) = cam.sample_point(sx, sy);
+            let ray = cam.primary_ray(px, py);
+            // Before the near plane: any hit between the eye and near.
+            let before = Ray {
+                t_min: 0.0,
+                t_max: ray.t_min,
+                ..ray
+            };
+            if accel.intersect(&before).is_some() {
+                return Explanation::NearPlane;
+            }
+            if id != BACKGROUND {
+                let material = scene.materials.get(usize::from(
+                    scene.tri_material.get(id as usize).copied().unwrap_or(0),
+                ));
+                if material.is_some_and(crate::shade::Material::spawns_rays) && scene.max_depth > 1
+                {
+                    best = best.min(Explanation::RayTree);
+                }
+                // Coincident surfaces along the ray.
+                let f = oracle.footprint(id, px, py);
+                if let Some(t) = f.t {
+                    let tol = oracle.depth_tolerance(&f) + f64::from(crate::math::gamma(16)) * t;
+                    let mut tie = false;
+                    #[expect(clippy::cast_possible_truncation, reason = "a window for the f32 ray")]
+                    let window = Ray {
+                        t_min: (t - 2.0 * tol).max(0.0) as f32,
+                        t_max: (t + 2.0 * tol) as f32,
+                        ..ray
+                    };
+                    accel.for_each_triangle_hit(&window, |other, _| {
+                        tie = other != id;
+                        tie
+                    });
+                    if tie {
+                        best = best.min(Explanation::DepthTie);
+                    }
+                }
+                if f.edge_dist <= oracle.edge_px {
+                    best = best.min(Explanation::Edge);
+                }
+            }
+            // Neighbours that see another surface, or another shadow bit.
+            let here = frame.flags[i];
+            if here & FLAG_DISCONTINUITY != 0 {
+                best = best.min(Explanation::ShadowOrGate);
+            }
+            for dy in -1i64..=1 {
+                for dx in -1i64..=1 {
+                    let (nx, ny) = (i64::from(sx) + dx, i64::from(sy) + dy);
+                    if nx < 0 || ny < 0 || nx >= i64::from(sw) || ny >= i64::from(sh) {
+                        continue;
+                    }
+                    #[expect(clippy::cast_sign_loss, reason = "checked non-negative")]
+                    let j = (ny as usize) * (sw as usize) + nx as usize;
+                    // A silhouette: the neighbour sees another object or
+                    // the background (inside one mesh, the exact distance
+                    // test above decides).
+                    let obj = |t: u32| {
+                        if t == BACKGROUND {
+                            None
+                        } else {
+                            scene.object_of(t)
+                        }
+                    };
+                    if obj(frame.id[j]) != obj(id) {
+                        best = best.min(Explanation::Edge);
+                    }
+                    if (frame.flags[j] ^ here) & !FLAG_DISCONTINUITY != 0 {
+                        best = best.min(Explanation::ShadowOrGate);
+                    }
+                }
+            }
+        }
+    }
+    best
+}
+
+/// Explains every pixel of `frame` whose largest 8-bit sRGB channel
+/// differs from `reference` by more than `max8`.
+#[must_use]
+pub fn explain(
+    frame: &Frame,
+    reference: &[crate::color::Rgb],
+    accel: &Accel<'_>,
+    oracle: &Oracle<'_>,
+    max8: u8,
+) -> (Explained, Vec<(u32, u32, Explanation)>) {
+    use crate::color::to_srgb8;
+    let mut counts = Explained::default();
+    let mut list = Vec::new();
+    for y in 0..frame.height {
+        for x in 0..frame.width {
+            let i = (y * frame.width + x) as usize;
+            let (p, q) = (frame.color[i], reference[i]);
+            let d = [(p.r, q.r), (p.g, q.g), (p.b, q.b)]
+                .iter()
+                .map(|(a, b)| to_srgb8(*a).abs_diff(to_srgb8(*b)))
+                .max()
+                .unwrap_or(0);
+            if d <= max8 {
+                continue;
+            }
+            counts.differing += 1;
+            let e = explain_pixel(frame, accel, oracle, x, y);
+            match e {
+                Explanation::NearPlane => counts.near_plane += 1,
+                Explanation::DepthTie => counts.depth_tie += 1,
+                Explanation::Edge => counts.edge += 1,
+                Explanation::ShadowOrGate => counts.shadow_or_gate += 1,
+                Explanation::RayTree => counts.ray_tree += 1,
+                Explanation::Unexplained => counts.unexplained += 1,
+            }
+            list.push((x, y, e));
+        }
+    }
+    (counts, list)
+}

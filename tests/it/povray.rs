@@ -1,0 +1,283 @@
+//! Both backends against the stored POV-Ray 3.7 references
+//! (`golden/pov`), without POV-Ray: mesh mode to the 8-bit bound with
+//! every pixel beyond it explained, analytic spheres exactly, the
+//! tessellation error of curved shapes measured; stale references fail.
+
+use rendiff::accel::{Accel, AccelOptions};
+use rendiff::color::to_srgb8;
+use rendiff::compare::explain::{Explained, explain};
+use rendiff::compare::{Oracle, derive_tolerances};
+use rendiff::image_io::read_png_linear;
+use rendiff::options::Geometry;
+use rendiff::pov::golden::{self, Variant};
+use rendiff::scene::Scene;
+use rendiff::{Backend, Overrides, Prepared};
+
+use crate::util::{bundled_scenes, load, root, scene_path};
+
+/// The 8-bit sRGB bound and the fraction of pixels that must meet it
+/// (the acceptance: 2/255 on ≥ 99.9 %). POVRAY.md measured the
+/// numpy reference at 1/65535 of POV-Ray everywhere; 2/255 leaves room for
+/// the f32 shading arithmetic and POV-Ray's f32 colours.
+const MAX8: u8 = 2;
+const FRACTION: f64 = 0.999;
+
+/// Scenes kept out of the tight group, and why.
+const EXCEPTIONS: &[(&str, &str)] = &[
+    (
+        "near_plane",
+        "geometry nearer than `near`, which POV-Ray does not clip",
+    ),
+    (
+        "polygons",
+        "a sticker coplanar with a wall: each renderer breaks the depth tie its own way",
+    ),
+];
+
+fn golden_dir() -> std::path::PathBuf {
+    root().join("golden/pov")
+}
+
+/// Fraction of pixels within the 8-bit bound.
+fn within(a: &[rendiff::color::Rgb], b: &[rendiff::color::Rgb]) -> (f64, u8) {
+    let mut ok = 0usize;
+    let mut max = 0u8;
+    for (p, q) in a.iter().zip(b) {
+        let d = [(p.r, q.r), (p.g, q.g), (p.b, q.b)]
+            .iter()
+            .map(|(x, y)| to_srgb8(*x).abs_diff(to_srgb8(*y)))
+            .max()
+            .unwrap_or(0);
+        max = max.max(d);
+        ok += usize::from(d <= MAX8);
+    }
+    (ok as f64 / a.len() as f64, max)
+}
+
+#[test]
+fn references_exist_and_are_not_stale() {
+    let mut problems = Vec::new();
+    for name in bundled_scenes() {
+        let job = load(&name, &Overrides::default());
+        problems.extend(golden::stale(&job.scene, &job.tri, &golden_dir()).unwrap());
+    }
+    assert!(
+        problems.is_empty(),
+        "stale or missing POV-Ray references (run `make golden`):\n{}",
+        problems.join("\n")
+    );
+}
+
+#[test]
+fn a_changed_scene_makes_its_reference_stale() {
+    let job = load("spheres", &Overrides::default());
+    let mut scene = job.scene.clone();
+    scene.materials[0].diffuse += 0.01;
+    let changed = Prepared::from_scene(scene, &Overrides::default()).unwrap();
+    let problems = golden::stale(&changed.scene, &changed.tri, &golden_dir()).unwrap();
+    assert!(problems.iter().any(|p| p.contains("stale")), "{problems:?}");
+    // And a scene without references is reported missing.
+    let text = std::fs::read_to_string(scene_path("spheres")).unwrap();
+    let orphan = Scene::from_str(&root().join("scenes/no_such_scene.toml"), &text).unwrap();
+    let job = Prepared::from_scene(orphan, &Overrides::default()).unwrap();
+    let problems = golden::stale(&job.scene, &job.tri, &golden_dir()).unwrap();
+    assert!(
+        problems.iter().any(|p| p.contains("missing")),
+        "{problems:?}"
+    );
+}
+
+/// Compares a backend with a reference; returns (within fraction, max 8-bit, explanations).
+fn against(
+    job: &Prepared,
+    backend: Backend,
+    variant: Variant,
+    geometry: Geometry,
+) -> (f64, u8, Explained) {
+    let depth = if variant == Variant::Depth1 {
+        1
+    } else {
+        job.settings.max_depth
+    };
+    let reference =
+        read_png_linear(&golden::reference_path(&golden_dir(), &job.scene, variant)).unwrap();
+    let frame = match (backend, geometry) {
+        (Backend::Ray, Geometry::Analytic) => {
+            let accel = Accel::new(
+                &job.tri,
+                AccelOptions {
+                    geometry,
+                    bvh: true,
+                },
+            );
+            rendiff::ray::render(
+                &accel,
+                &rendiff::ray::RayOptions {
+                    max_depth: depth,
+                    shadows: true,
+                    gate_eps: rendiff::GATE_EPS,
+                },
+            )
+        }
+        _ => job.render_with_depth(backend, depth).frame,
+    };
+    let (frac, max8) = within(&frame.color, &reference.pixels);
+    let tol = derive_tolerances(&job.tri);
+    let accel = Accel::new(&job.tri, AccelOptions::default());
+    let oracle = Oracle::new(&job.tri, tol.edge_px, tol.near_eps, job.settings.depth);
+    let (explained, _) = explain(&frame, &reference.pixels, &accel, &oracle, MAX8);
+    (frac, max8, explained)
+}
+
+/// Mesh mode: the ray tracer against the scene's reference, the
+/// rasterizer against the max_depth = 1 one, each within 2/255 on ≥ 99.9 %
+/// of the pixels and every pixel beyond explained.
+#[test]
+fn both_backends_match_povray_in_mesh_mode() {
+    let mut report = String::new();
+    let mut checked = 0;
+    for name in bundled_scenes() {
+        let job = load(&name, &Overrides::default());
+        let has_d1 = golden::reference_path(&golden_dir(), &job.scene, Variant::Depth1).exists();
+        for (backend, variant) in [
+            (Backend::Ray, Variant::Main),
+            (
+                Backend::Raster,
+                if has_d1 {
+                    Variant::Depth1
+                } else {
+                    Variant::Main
+                },
+            ),
+        ] {
+            let (frac, max8, e) = against(&job, backend, variant, Geometry::Mesh);
+            report.push_str(&format!(
+                "{name:16} {backend:6} vs pov{:10}: {:.4} % within 2/255, max {max8}/255; beyond: {} at edges, {} depth ties, {} shadow/gate, {} near plane, {} ray tree, {} unexplained\n",
+                variant.suffix(),
+                frac * 100.0,
+                e.edge,
+                e.depth_tie,
+                e.shadow_or_gate,
+                e.near_plane,
+                e.ray_tree,
+                e.unexplained
+            ));
+            if let Some((_, why)) = EXCEPTIONS.iter().find(|(n, _)| *n == name) {
+                report.push_str(&format!("{:16} (out of the tight group: {why})\n", ""));
+                // Still: every differing pixel is explained.
+                assert_eq!(e.unexplained, 0, "{name} {backend}: unexplained pixels");
+                continue;
+            }
+            assert!(
+                frac >= FRACTION,
+                "{name} {backend}: only {:.3} % within 2/255",
+                frac * 100.0
+            );
+            assert_eq!(
+                e.unexplained, 0,
+                "{name} {backend}: {} pixels beyond 2/255 unexplained",
+                e.unexplained
+            );
+            // Differences born along secondary rays stay rare: at most 1 in 10^4 pixels.
+            assert!(
+                e.ray_tree * 10_000 <= (job.tri.camera.width() * job.tri.camera.height()) as u64,
+                "{name} {backend}: {} ray-tree differences",
+                e.ray_tree
+            );
+            checked += 1;
+        }
+    }
+    eprint!("{report}");
+    assert!(checked >= 20, "{checked} comparisons in the tight group");
+}
+
+/// Analytic spheres: the ray tracer's exact spheres against POV-Ray's
+/// `sphere` primitives, on the scenes whose curved shapes are all spheres.
+#[test]
+fn analytic_spheres_match_povray() {
+    for name in ["spheres", "glass"] {
+        let job = load(name, &Overrides::default());
+        let (frac, max8, e) = against(&job, Backend::Ray, Variant::Analytic, Geometry::Analytic);
+        eprintln!(
+            "{name}: analytic: {:.4} % within 2/255, max {max8}/255, {} unexplained",
+            frac * 100.0,
+            e.unexplained
+        );
+        assert!(
+            frac >= FRACTION,
+            "{name}: {:.3} % within 2/255",
+            frac * 100.0
+        );
+    }
+}
+
+/// The tessellation error, measured: the mesh render of curved shapes at
+/// several `tessellation_error` settings against POV-Ray's analytic
+/// render. The error shrinks as the tessellation gets finer.
+#[test]
+fn tessellation_error_against_povray_analytic() {
+    let mut table =
+        String::from("scene            tess_err  triangles  >2/255 px  mean |Δ|   max 8-bit\n");
+    for name in ["spheres", "superellipsoids"] {
+        let base = Scene::load(&scene_path(name)).unwrap();
+        let reference = read_png_linear(&golden::reference_path(
+            &golden_dir(),
+            &base,
+            Variant::Analytic,
+        ))
+        .unwrap();
+        let mut last = usize::MAX;
+        for err in [2.0, 1.0, 0.5, 0.25, 0.1] {
+            let mut scene = base.clone();
+            scene.render.tessellation_error = err;
+            let job = Prepared::from_scene(scene, &Overrides::default()).unwrap();
+            let frame = job.render(Backend::Ray).frame;
+            let mut beyond = 0usize;
+            let mut sum = 0.0f64;
+            let mut max = 0u8;
+            for (p, q) in frame.color.iter().zip(&reference.pixels) {
+                let d = [(p.r, q.r), (p.g, q.g), (p.b, q.b)]
+                    .iter()
+                    .map(|(x, y)| to_srgb8(*x).abs_diff(to_srgb8(*y)))
+                    .max()
+                    .unwrap_or(0);
+                beyond += usize::from(d > MAX8);
+                max = max.max(d);
+                sum += f64::from(p.max_abs_diff(*q));
+            }
+            table.push_str(&format!(
+                "{name:16} {err:8}  {:9}  {beyond:9}  {:.2e}   {max}\n",
+                job.tri.len(),
+                sum / frame.color.len() as f64
+            ));
+            assert!(
+                beyond <= last.saturating_add(last / 4 + 20),
+                "{name}: the error grew at tessellation_error {err}"
+            );
+            last = beyond;
+        }
+    }
+    eprint!("{table}");
+}
+
+/// The export text of every bundled scene (large arrays abridged to their
+/// count and hash), mesh and analytic.
+#[test]
+fn export_text_snapshots() {
+    use rendiff::pov::{ExportOptions, export};
+    for name in bundled_scenes() {
+        let job = load(&name, &Overrides::default());
+        for geometry in [Geometry::Mesh, Geometry::Analytic] {
+            let e = export(
+                &job.scene,
+                &job.tri,
+                &ExportOptions {
+                    geometry,
+                    max_depth: job.settings.max_depth,
+                    abridged: true,
+                },
+            );
+            insta::assert_snapshot!(format!("export_{name}_{geometry}"), e.text);
+        }
+    }
+}
