@@ -4,8 +4,10 @@ export CARGO_TERM_COLOR ?= never
 
 .PHONY: test lint unit golden golden-check bless bench fuzz doc clean
 
-## The whole test suite: formatting, lints, unit, integration and doc tests.
-test: lint unit
+## The whole test suite: formatting, lints, unit, integration and doc
+## tests, then (where POV-Ray is installed) the check that every stored
+## POV-Ray reference is current and still what POV-Ray renders.
+test: lint unit golden-check
 
 lint:
 	$(CARGO) fmt --all --check
@@ -13,6 +15,21 @@ lint:
 
 unit:
 	$(CARGO) test
+
+## Re-render the POV-Ray references of the bundled scenes (golden/pov).
+golden:
+	$(CARGO) run --release -- golden --update
+
+## Check mode: re-render into a temporary folder and compare bit for bit.
+## Skipped without POV-Ray unless RENDIFF_REQUIRE_POVRAY=1 (as in CI).
+golden-check:
+	@if command -v povray >/dev/null 2>&1; then \
+		$(CARGO) run -q -- golden; \
+	elif [ "$${RENDIFF_REQUIRE_POVRAY:-0}" = 1 ]; then \
+		echo "golden-check: povray is required but not installed" >&2; exit 1; \
+	else \
+		echo "golden-check: skipped (povray is not installed; sudo apt-get install -y povray)"; \
+	fi
 
 ## Rewrite the regression goldens that fail (golden/raster, golden/ray) and
 ## accept changed insta snapshots; review the diff before committing.

@@ -163,7 +163,7 @@ impl Report {
         if let Some(e) = &self.explained {
             let _ = writeln!(
                 o,
-                "  beyond the 8-bit bound: {} pixels: {} at edges, {} depth ties, {} shadow boundaries or gates, {} before the near plane, {} in the ray tree, {} unexplained",
+                "  beyond the 8-bit bound: {} pixel(s): {} at edges, {} depth ties, {} shadow boundaries or gates, {} before the near plane, {} in the ray tree, {} unexplained",
                 e.differing,
                 e.edge,
                 e.depth_tie,

@@ -7,12 +7,18 @@ use std::process::{Command, Output};
 use crate::util::root;
 
 fn rendiff(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_rendiff"))
-        .args(args)
+    rendiff_with_env(args, &[])
+}
+
+fn rendiff_with_env(args: &[&str], env: &[(&str, &Path)]) -> Output {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_rendiff"));
+    cmd.args(args)
         .current_dir(root())
-        .env("RUST_BACKTRACE", "1")
-        .output()
-        .expect("could not run rendiff")
+        .env("RUST_BACKTRACE", "1");
+    for (k, v) in env {
+        cmd.env(k, v);
+    }
+    cmd.output().expect("could not run rendiff")
 }
 
 fn stdout(o: &Output) -> String {
@@ -275,4 +281,123 @@ fn html_report_loads_in_a_headless_browser() {
             stderr(&o)
         );
     }
+}
+
+/// Without POV-Ray, every command that needs it says how to install it
+/// and exits with status 2 (no output written); commands that only read
+/// stored references keep working.
+#[test]
+fn missing_povray_is_a_clear_error() {
+    let empty = temp("no-povray-path");
+    let out = temp("no-povray-out");
+    let path = [("PATH", empty.as_path())];
+    for args in [
+        &["golden", "scenes/spheres.toml"][..],
+        &[
+            "golden",
+            "scenes/spheres.toml",
+            "--update",
+            "--golden",
+            out.to_str().unwrap(),
+        ],
+        &["diff", "scenes/spheres.toml", "--b", "pov", "--render"],
+    ] {
+        let o = rendiff_with_env(args, &path);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {}", stderr(&o));
+        let err = stderr(&o);
+        assert!(
+            err.contains("POV-Ray is not installed") && err.contains("apt-get install -y povray"),
+            "{args:?}: {err}"
+        );
+    }
+    assert_eq!(std::fs::read_dir(&out).unwrap().count(), 0, "files written");
+    // The stored reference needs no POV-Ray.
+    let o = rendiff_with_env(
+        &["diff", "scenes/spheres.toml", "--b", "pov", "--json"],
+        &path,
+    );
+    assert!(
+        o.status.code() == Some(0) || o.status.code() == Some(1),
+        "{}",
+        stderr(&o)
+    );
+}
+
+fn povray_installed() -> bool {
+    let found = Command::new("povray").arg("--version").output().is_ok();
+    assert!(
+        found || std::env::var("RENDIFF_REQUIRE_POVRAY").is_err(),
+        "povray is required but not installed"
+    );
+    found
+}
+
+/// `rendiff golden` in check mode, with POV-Ray: a copy of the stored
+/// references passes; a tampered scene hash is reported stale and a
+/// tampered image as no longer reproduced, each with exit status 1.
+/// (`.ci/run` installs POV-Ray and sets RENDIFF_REQUIRE_POVRAY=1.)
+#[test]
+fn golden_check_reports_stale_and_changed_references() {
+    if !povray_installed() {
+        eprintln!("skipped: povray is not installed");
+        return;
+    }
+    let dir = temp("golden-check");
+    for f in std::fs::read_dir(root().join("golden/pov")).unwrap() {
+        let f = f.unwrap().path();
+        let name = f.file_name().unwrap().to_string_lossy().into_owned();
+        if name.starts_with("spheres.") {
+            std::fs::copy(&f, dir.join(&name)).unwrap();
+        }
+    }
+    let args = [
+        "golden",
+        "scenes/spheres.toml",
+        "--golden",
+        dir.to_str().unwrap(),
+    ];
+    let o = rendiff(&args);
+    assert_eq!(o.status.code(), Some(0), "{}{}", stdout(&o), stderr(&o));
+    assert!(stdout(&o).contains("reproduced exactly"), "{}", stdout(&o));
+
+    // A scene edited since its reference was rendered: its hash no longer matches.
+    let meta = dir.join("spheres.toml");
+    let text = std::fs::read_to_string(&meta).unwrap();
+    let tampered: String = text
+        .lines()
+        .map(|l| {
+            if l.starts_with("pov_fnv1a") {
+                "pov_fnv1a = \"0000000000000000\"".to_string()
+            } else {
+                l.to_string()
+            }
+        })
+        .collect::<Vec<_>>()
+        .join("\n");
+    assert_ne!(tampered, text, "no export hash in {}", meta.display());
+    std::fs::write(&meta, &tampered).unwrap();
+    let o = rendiff(&args);
+    assert_eq!(o.status.code(), Some(1), "{}{}", stdout(&o), stderr(&o));
+    assert!(stdout(&o).contains("stale"), "{}", stdout(&o));
+    std::fs::write(&meta, &text).unwrap();
+
+    // A reference image that POV-Ray no longer reproduces.
+    let png = dir.join("spheres.png");
+    let mut img = rendiff::image_io::read_png_linear(&png).unwrap();
+    img.pixels[0].r = (img.pixels[0].r + 0.25).min(1.0);
+    rendiff::image_io::write_png(
+        &png,
+        img.width,
+        img.height,
+        &img.pixels,
+        rendiff::image_io::PngEncoding::Linear16,
+    )
+    .unwrap();
+    let o = rendiff(&args);
+    assert_eq!(o.status.code(), Some(1), "{}{}", stdout(&o), stderr(&o));
+    assert!(
+        stdout(&o).contains("renders it differently"),
+        "{}",
+        stdout(&o)
+    );
 }

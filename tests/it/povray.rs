@@ -22,15 +22,22 @@ use crate::util::{bundled_scenes, load, root, scene_path};
 const MAX8: u8 = 2;
 const FRACTION: f64 = 0.999;
 
-/// Scenes kept out of the tight group, and why.
-const EXCEPTIONS: &[(&str, &str)] = &[
+/// A scene name, why it is excepted, and the count of its documented cause.
+type Exception = (&'static str, &'static str, fn(&Explained) -> u64);
+
+/// Scenes kept out of the tight group, why, and the one cause that their
+/// extra differences must have: with those pixels set aside, the scene
+/// still meets the bound on ≥ 99.9 % of its pixels.
+const EXCEPTIONS: &[Exception] = &[
     (
         "near_plane",
         "geometry nearer than `near`, which POV-Ray does not clip",
+        |e| e.near_plane,
     ),
     (
         "polygons",
         "a sticker coplanar with a wall: each renderer breaks the depth tie its own way",
+        |e| e.depth_tie,
     ),
 ];
 
@@ -152,8 +159,8 @@ fn both_backends_match_povray_in_mesh_mode() {
         ] {
             let (frac, max8, e) = against(&job, backend, variant, Geometry::Mesh);
             report.push_str(&format!(
-                "{name:16} {backend:6} vs pov{:10}: {:.4} % within 2/255, max {max8}/255; beyond: {} at edges, {} depth ties, {} shadow/gate, {} near plane, {} ray tree, {} unexplained\n",
-                variant.suffix(),
+                "{name:16} {backend:6} vs {:7}: {:.4} % within 2/255, max {max8}/255; beyond: {} at edges, {} depth ties, {} shadow/gate, {} near plane, {} ray tree, {} unexplained\n",
+                format!("pov{}", variant.suffix()),
                 frac * 100.0,
                 e.edge,
                 e.depth_tie,
@@ -162,10 +169,18 @@ fn both_backends_match_povray_in_mesh_mode() {
                 e.ray_tree,
                 e.unexplained
             ));
-            if let Some((_, why)) = EXCEPTIONS.iter().find(|(n, _)| *n == name) {
+            if let Some((_, why, cause)) = EXCEPTIONS.iter().find(|(n, ..)| *n == name) {
                 report.push_str(&format!("{:16} (out of the tight group: {why})\n", ""));
-                // Still: every differing pixel is explained.
+                // Still: every differing pixel is explained, and apart
+                // from the documented cause the scene meets the bound.
                 assert_eq!(e.unexplained, 0, "{name} {backend}: unexplained pixels");
+                let pixels = (job.tri.camera.width() * job.tri.camera.height()) as f64;
+                let rest = frac + cause(&e) as f64 / pixels;
+                assert!(
+                    rest >= FRACTION,
+                    "{name} {backend}: {:.3} % within 2/255 with the documented cause set aside",
+                    rest * 100.0
+                );
                 continue;
             }
             assert!(

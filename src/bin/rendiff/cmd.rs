@@ -104,10 +104,25 @@ fn golden(a: &GoldenArgs) -> Result<Outcome> {
         .with_context(|| format!("could not create {}", work.display()))?;
     let progress = progress_bar(jobs.len());
     let mut outcome = Outcome::Ok;
+    // POV-Ray runs single-threaded (+WT1, for reproducibility), so the
+    // scenes render side by side, each in its own folder.
+    let renders: Vec<_> = {
+        use rayon::prelude::*;
+        jobs.par_iter()
+            .enumerate()
+            .map(|(i, job)| {
+                let dir = work.join(i.to_string());
+                std::fs::create_dir_all(&dir)
+                    .with_context(|| format!("could not create {}", dir.display()))?;
+                let r = golden::render_all(&job.scene, &job.tri, &a.golden_dir, &dir);
+                progress.inc(1);
+                Ok::<_, anyhow::Error>(r?)
+            })
+            .collect()
+    };
     let result = (|| -> Result<()> {
-        for job in &jobs {
-            progress.set_message(job.scene.name());
-            let rendered = golden::render_all(&job.scene, &job.tri, &a.golden_dir, &work)?;
+        for (job, rendered) in jobs.iter().zip(renders) {
+            let rendered: Vec<_> = rendered?;
             if a.update {
                 golden::store(&job.scene, &version, &rendered, &a.golden_dir)?;
                 note(
@@ -152,7 +167,6 @@ fn golden(a: &GoldenArgs) -> Result<Outcome> {
                     }
                 }
             }
-            progress.inc(1);
         }
         Ok(())
     })();
