@@ -163,6 +163,22 @@ pub struct Rendered {
     /// Wall time of the render in milliseconds (build of acceleration
     /// structures included).
     pub time_ms: f64,
+    /// The work done, as the backend counted it.
+    pub work: Work,
+}
+
+/// The work a render did (what the plan can save).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Work {
+    /// The rasterizer's counters.
+    Raster(raster::RasterStats),
+    /// The ray tracer's counters and its acceleration structure.
+    Ray {
+        /// Rays cast.
+        rays: ray::RayStats,
+        /// The BVH (a single leaf when the plan chose the flat loop).
+        bvh: accel::BvhStats,
+    },
 }
 
 impl Prepared {
@@ -217,8 +233,11 @@ impl Prepared {
             max_depth: ov.max_depth.unwrap_or(scene.render.max_depth),
             plan: !ov.no_plan,
         };
+        let mut tri = tri;
         let plan = if settings.plan {
-            Plan::for_scene(&tri, settings.bvh, settings.max_depth)
+            let plan = Plan::for_scene(&tri, settings.bvh, settings.max_depth);
+            plan.apply(&mut tri);
+            plan
         } else {
             Plan::everything(&tri, settings.bvh)
         };
@@ -254,8 +273,11 @@ impl Prepared {
     #[must_use]
     pub fn render_with_depth(&self, backend: Backend, max_depth: u32) -> Rendered {
         let start = Instant::now();
-        let frame = match backend {
-            Backend::Raster => raster::render(&self.tri, &self.raster_options()).0,
+        let (frame, work) = match backend {
+            Backend::Raster => {
+                let (frame, stats) = raster::render(&self.tri, &self.raster_options());
+                (frame, Work::Raster(stats))
+            }
             Backend::Ray => {
                 let accel = Accel::new(
                     &self.tri,
@@ -265,12 +287,19 @@ impl Prepared {
                     },
                 );
                 let max_depth = if self.plan.ray_tree { max_depth } else { 1 };
-                ray::render(
+                let (frame, rays) = ray::render_counted(
                     &accel,
                     &ray::RayOptions {
                         max_depth,
                         shadows: self.plan.shadows,
                         gate_eps: GATE_EPS,
+                    },
+                );
+                (
+                    frame,
+                    Work::Ray {
+                        rays,
+                        bvh: accel.stats(),
                     },
                 )
             }
@@ -278,6 +307,7 @@ impl Prepared {
         Rendered {
             frame,
             time_ms: start.elapsed().as_secs_f64() * 1e3,
+            work,
         }
     }
 }

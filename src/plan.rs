@@ -9,7 +9,7 @@ use std::fmt;
 
 use crate::math::{DVec3, to_f64};
 use crate::options::BvhMode;
-use crate::tri_scene::TriScene;
+use crate::tri_scene::{NO_INDEX, TriScene};
 
 /// Scenes with at most this many triangles use a flat loop instead of a
 /// BVH when `bvh = "auto"`: measured with `cargo bench --bench bvh_threshold`
@@ -40,6 +40,8 @@ pub struct Plan {
     pub frustum_cull: Vec<bool>,
     /// Per object: back faces can be culled by the rasterizer's primary visibility.
     pub backface_cull: Vec<bool>,
+    /// Per material: its uvs are needed (an image pigment or a bump map).
+    pub uv: Vec<bool>,
     /// The decisions, for `rendiff plan`.
     pub decisions: Vec<Decision>,
 }
@@ -70,6 +72,7 @@ impl Plan {
             bvh: bvh != BvhMode::Off,
             frustum_cull: vec![false; n],
             backface_cull: vec![false; n],
+            uv: vec![true; scene.materials.len()],
             decisions: vec![Decision {
                 what: "everything",
                 on: true,
@@ -121,6 +124,59 @@ impl Plan {
             } else {
                 format!("reflecting/transmitting: {}", spawning.join(", "))
             },
+        });
+
+        // uv and texture work: only materials with an image pigment or a
+        // bump map read uvs; the other triangles drop theirs (`apply`).
+        let uv: Vec<bool> = scene.materials.iter().map(|m| m.needs_uv()).collect();
+        let with_uv = scene
+            .tri_uvs
+            .iter()
+            .zip(&scene.tri_material)
+            .filter(|(t, _)| t[0] != NO_INDEX)
+            .count();
+        let kept = scene
+            .tri_uvs
+            .iter()
+            .zip(&scene.tri_material)
+            .filter(|(t, m)| t[0] != NO_INDEX && uv[usize::from(**m)])
+            .count();
+        let textured: Vec<&str> = scene
+            .materials
+            .iter()
+            .zip(&uv)
+            .filter(|(_, u)| **u)
+            .map(|(m, _)| m.name.as_str())
+            .collect();
+        decisions.push(Decision {
+            what: "uv and textures",
+            on: !textured.is_empty(),
+            why: if textured.is_empty() {
+                format!("no material has an image pigment or a bump map; uvs of {with_uv} triangle(s) dropped")
+            } else {
+                format!(
+                    "textured: {}; uvs kept on {kept} of {with_uv} triangle(s)",
+                    textured.join(", ")
+                )
+            },
+        });
+
+        // Smooth normals: interpolated only on triangles that carry corner
+        // normals (smooth = true meshes and curved shapes); smooth = false
+        // meshes were tessellated without them.
+        let smooth = scene
+            .tri_normals
+            .iter()
+            .filter(|t| t[0] != NO_INDEX)
+            .count();
+        let flat_meshes = scene.objects.iter().filter(|o| !o.smooth).count();
+        decisions.push(Decision {
+            what: "smooth normals",
+            on: smooth > 0,
+            why: format!(
+                "interpolated on {smooth} of {} triangle(s); {flat_meshes} object(s) flat",
+                scene.len()
+            ),
         });
 
         let bvh = match bvh_mode {
@@ -180,8 +236,38 @@ impl Plan {
             bvh,
             frustum_cull,
             backface_cull,
+            uv,
             decisions,
         }
+    }
+
+    /// Applies the decisions that change the triangle scene itself: drops
+    /// the uvs of triangles (and analytic spheres) whose material reads
+    /// none. Returns how many primitives lost their uvs.
+    pub fn apply(&self, scene: &mut TriScene) -> usize {
+        let mut dropped = 0;
+        for (t, m) in scene.tri_uvs.iter_mut().zip(&scene.tri_material) {
+            if t[0] != NO_INDEX && !self.uv.get(usize::from(*m)).copied().unwrap_or(true) {
+                *t = [NO_INDEX; 3];
+                dropped += 1;
+            }
+        }
+        if scene.tri_uvs.iter().all(|t| t[0] == NO_INDEX) {
+            scene.uvs = Vec::new();
+        }
+        for s in &mut scene.spheres {
+            if s.uv
+                && !self
+                    .uv
+                    .get(usize::from(s.material))
+                    .copied()
+                    .unwrap_or(true)
+            {
+                s.uv = false;
+                dropped += 1;
+            }
+        }
+        dropped
     }
 }
 

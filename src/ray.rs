@@ -44,11 +44,71 @@ const TILE: u32 = 16;
 /// (POV-Ray); this bounds them per path so no scene can recurse without end.
 const MAX_STRAIGHT: u32 = 64;
 
+/// What a render cast: the work the plan can save, and the denominators
+/// of the ray rates.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RayStats {
+    /// Primary rays (one per sample).
+    pub primary: u64,
+    /// Shadow rays.
+    pub shadow: u64,
+    /// Reflected, refracted and straight-through rays.
+    pub secondary: u64,
+}
+
+impl std::ops::Add for RayStats {
+    type Output = RayStats;
+    fn add(self, o: RayStats) -> RayStats {
+        RayStats {
+            primary: self.primary + o.primary,
+            shadow: self.shadow + o.shadow,
+            secondary: self.secondary + o.secondary,
+        }
+    }
+}
+
+/// Where a ray is in the ray tree: its trace level (POV-Ray's trace level:
+/// 1 for primary rays) and how many straight continuations through
+/// `ior = 1` surfaces led to it.
+#[derive(Clone, Copy, Debug)]
+struct Depth {
+    level: u32,
+    straight: u32,
+}
+
+impl Depth {
+    const PRIMARY: Depth = Depth {
+        level: 1,
+        straight: 0,
+    };
+
+    /// A reflected or refracted child.
+    fn deeper(self) -> Depth {
+        Depth {
+            level: self.level + 1,
+            ..self
+        }
+    }
+
+    /// A straight continuation: the level is not used up.
+    fn straight_on(self) -> Depth {
+        Depth {
+            straight: self.straight + 1,
+            ..self
+        }
+    }
+}
+
+/// One worker's view: the shadow rays it casts and its counters.
+struct Worker<'a, 's> {
+    vis: ShadowRays<'a, 's>,
+    secondary: u64,
+}
+
 struct Tracer<'a, 's> {
     accel: &'a Accel<'s>,
     scene: &'s TriScene,
     ctx: ShadeContext<'s>,
-    vis: ShadowRays<'a, 's>,
     max_depth: u32,
     /// Refracting objects that contain the eye (outermost first).
     eye_inside: Vec<u32>,
@@ -66,6 +126,12 @@ struct SampleOut {
 /// Renders a scene with the given accelerator.
 #[must_use]
 pub fn render(accel: &Accel<'_>, opts: &RayOptions) -> Frame {
+    render_counted(accel, opts).0
+}
+
+/// Renders a scene and counts the rays cast.
+#[must_use]
+pub fn render_counted(accel: &Accel<'_>, opts: &RayOptions) -> (Frame, RayStats) {
     let scene = accel.scene();
     let cam = &scene.camera;
     let ctx = ShadeContext {
@@ -76,7 +142,10 @@ pub fn render(accel: &Accel<'_>, opts: &RayOptions) -> Frame {
         shadows: opts.shadows,
     };
     let eye = cam.eye_f32();
+    // Which refracting objects contain the eye: only needed by the ray tree.
+    let spawns = opts.max_depth > 1;
     let mut eye_inside: Vec<u32> = (0..u32::try_from(scene.objects.len()).unwrap_or(0))
+        .filter(|_| spawns)
         .filter(|&o| {
             let info = &scene.objects[o as usize];
             let m = &scene.materials[usize::from(info.material)];
@@ -93,7 +162,6 @@ pub fn render(accel: &Accel<'_>, opts: &RayOptions) -> Frame {
         accel,
         scene,
         ctx,
-        vis: ShadowRays::new(accel),
         max_depth: opts.max_depth.max(1),
         eye_inside,
     };
@@ -103,20 +171,32 @@ pub fn render(accel: &Accel<'_>, opts: &RayOptions) -> Frame {
     let tiles: Vec<(u32, u32)> = (0..tiles_y)
         .flat_map(|ty| (0..tiles_x).map(move |tx| (tx, ty)))
         .collect();
-    let results: Vec<Vec<SampleOut>> = tiles
+    let results: Vec<(Vec<SampleOut>, RayStats)> = tiles
         .par_iter()
         .map(|&(tx, ty)| {
             let mut out = Vec::with_capacity((TILE * TILE) as usize);
+            let mut w = Worker {
+                vis: ShadowRays::new(accel),
+                secondary: 0,
+            };
             for sy in ty * TILE..((ty + 1) * TILE).min(sh) {
                 for sx in tx * TILE..((tx + 1) * TILE).min(sw) {
-                    out.push(tracer.sample(sx, sy));
+                    out.push(tracer.sample(sx, sy, &mut w));
                 }
             }
-            out
+            let stats = RayStats {
+                primary: out.len() as u64,
+                shadow: w.vis.cast(),
+                secondary: w.secondary,
+            };
+            (out, stats)
         })
         .collect();
+    let stats = results
+        .iter()
+        .fold(RayStats::default(), |acc, (_, s)| acc + *s);
     let mut frame = Frame::new(cam.width(), cam.height(), cam.samples(), scene.background);
-    for (&(tx, ty), res) in tiles.iter().zip(&results) {
+    for (&(tx, ty), (res, _)) in tiles.iter().zip(&results) {
         let mut k = 0;
         for sy in ty * TILE..((ty + 1) * TILE).min(sh) {
             for sx in tx * TILE..((tx + 1) * TILE).min(sw) {
@@ -131,7 +211,7 @@ pub fn render(accel: &Accel<'_>, opts: &RayOptions) -> Frame {
         }
     }
     frame.resolve();
-    frame
+    (frame, stats)
 }
 
 /// A colour with non-finite channels replaced by 0: never a NaN pixel.
@@ -141,7 +221,7 @@ fn sanitize(c: Rgb) -> Rgb {
 }
 
 impl Tracer<'_, '_> {
-    fn sample(&self, sx: u32, sy: u32) -> SampleOut {
+    fn sample(&self, sx: u32, sy: u32, w: &mut Worker<'_, '_>) -> SampleOut {
         let cam = &self.scene.camera;
         let (x, y) = cam.sample_point(sx, sy);
         let (o64, d64) = cam.primary_ray_f64(x, y);
@@ -155,9 +235,10 @@ impl Tracer<'_, '_> {
             };
         };
         let (sp, p64) = self.surface(&hit, o64, d64, &ray);
-        let shaded = shade::shade(&self.ctx, &sp, ray.dir, &self.vis);
+        let shaded = shade::shade(&self.ctx, &sp, ray.dir, &w.vis);
         let mut inside = self.eye_inside.clone();
-        let color = shaded.local + self.children(&sp, &shaded, ray.dir, 1, &mut inside, 0);
+        let color =
+            shaded.local + self.children(w, &sp, &shaded, ray.dir, Depth::PRIMARY, &mut inside);
         #[expect(clippy::cast_possible_truncation, reason = "frame depth is f32")]
         let depth = cam.frame_depth(p64) as f32;
         SampleOut {
@@ -183,14 +264,15 @@ impl Tracer<'_, '_> {
         }
     }
 
-    /// Colour along a secondary ray at trace level `level`.
-    fn trace(&self, ray: &Ray, level: u32, inside: &mut Vec<u32>, straight: u32) -> Rgb {
+    /// Colour along a secondary ray.
+    fn trace(&self, w: &mut Worker<'_, '_>, ray: &Ray, depth: Depth, inside: &mut Vec<u32>) -> Rgb {
+        w.secondary += 1;
         let Some(hit) = self.accel.intersect(ray) else {
             return self.scene.background;
         };
         let (sp, _) = self.surface(&hit, to_f64(ray.origin), to_f64(ray.dir), ray);
-        let shaded = shade::shade(&self.ctx, &sp, ray.dir, &self.vis);
-        shaded.local + self.children(&sp, &shaded, ray.dir, level, inside, straight)
+        let shaded = shade::shade(&self.ctx, &sp, ray.dir, &w.vis);
+        shaded.local + self.children(w, &sp, &shaded, ray.dir, depth, inside)
     }
 
     fn spawn(sp: &SurfacePoint, dir: Vec3) -> Ray {
@@ -202,17 +284,17 @@ impl Tracer<'_, '_> {
         }
     }
 
-    /// Reflection and transmission at a hit of trace level `level`.
+    /// Reflection and transmission at a hit at `depth`.
     fn children(
         &self,
+        w: &mut Worker<'_, '_>,
         sp: &SurfacePoint,
         shaded: &Shaded,
         d: Vec3,
-        level: u32,
+        depth: Depth,
         inside: &mut Vec<u32>,
-        straight: u32,
     ) -> Rgb {
-        if level >= self.max_depth {
+        if depth.level >= self.max_depth {
             return Rgb::BLACK;
         }
         let m = &self.scene.materials[usize::from(sp.material)];
@@ -222,9 +304,9 @@ impl Tracer<'_, '_> {
             if m.ior == 1.0 {
                 // POV-Ray: through an ior-1 surface the ray goes on straight
                 // and the trace level is not used up.
-                if straight < MAX_STRAIGHT {
+                if depth.straight < MAX_STRAIGHT {
                     let ray = Self::spawn(sp, d);
-                    c += shaded.transmit * self.trace(&ray, level, inside, straight + 1);
+                    c += shaded.transmit * self.trace(w, &ray, depth.straight_on(), inside);
                 }
             } else {
                 let obj = sp.object;
@@ -254,21 +336,21 @@ impl Tracer<'_, '_> {
                         }
                         let ray = Self::spawn(sp, t);
                         c += shaded.transmit
-                            * self.trace(&ray, level + 1, &mut child_inside, straight);
+                            * self.trace(w, &ray, depth.deeper(), &mut child_inside);
                     }
                     None => {
                         // Total internal reflection: the mirror ray, added
                         // unfiltered, staying inside; no `reflection` here.
                         total_internal = true;
                         let ray = Self::spawn(sp, shade::reflect(d, shaded.normal));
-                        c += self.trace(&ray, level + 1, inside, straight);
+                        c += self.trace(w, &ray, depth.deeper(), inside);
                     }
                 }
             }
         }
         if shaded.reflection > 0.0 && !total_internal {
             let ray = Self::spawn(sp, shade::reflect(d, shaded.normal));
-            c += self.trace(&ray, level + 1, inside, straight) * shaded.reflection;
+            c += self.trace(w, &ray, depth.deeper(), inside) * shaded.reflection;
         }
         c
     }

@@ -772,6 +772,7 @@ fn append(
             world_to_object: tr.matrix().inverse(),
             object_center: *center,
             material: obj.material,
+            uv: true,
         });
     }
     out.objects.push(ObjectInfo {

@@ -55,6 +55,9 @@ pub struct AnalyticSphere {
     pub object_center: DVec3,
     /// Material.
     pub material: u16,
+    /// Compute the spherical uv map at hits (the plan turns it off where
+    /// the material reads no uvs).
+    pub uv: bool,
 }
 
 /// The triangulated scene.
@@ -367,8 +370,9 @@ impl TriScene {
     pub fn sphere_surface_at(&self, k: usize, p: DVec3) -> SurfacePoint {
         let s = &self.spheres[k];
         let n = ((p - s.center) / s.radius).normalize_or_zero();
-        let q = (s.world_to_object.transform_point3(p) - s.object_center).normalize_or_zero();
-        let uv = sphere_uv(q);
+        let uv = s.uv.then(|| {
+            sphere_uv((s.world_to_object.transform_point3(p) - s.object_center).normalize_or_zero())
+        });
         let p32 = to_f32(p);
         // The hit point comes from the stable quadratic: its error is a few
         // ulps of the largest coordinate involved.
@@ -380,7 +384,7 @@ impl TriScene {
             p_error,
             ng: ns,
             ns,
-            uv: Some(uv),
+            uv,
             dpdu: Vec3::ZERO,
             dpdv: Vec3::ZERO,
             material: s.material,

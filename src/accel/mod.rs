@@ -220,16 +220,30 @@ impl<'s> Accel<'s> {
 }
 
 /// Shadow rays through an [`Accel`]: the [`Visibility`] both backends use.
+///
+/// It counts the rays it casts. Each worker makes its own instance (two
+/// words), so the counter is never contended; the counts are summed.
 #[derive(Debug)]
 pub struct ShadowRays<'a, 's> {
     accel: &'a Accel<'s>,
+    cast: std::sync::atomic::AtomicU64,
 }
 
 impl<'a, 's> ShadowRays<'a, 's> {
     /// Shadow rays against the given structure.
     #[must_use]
     pub fn new(accel: &'a Accel<'s>) -> ShadowRays<'a, 's> {
-        ShadowRays { accel }
+        ShadowRays {
+            accel,
+            cast: std::sync::atomic::AtomicU64::new(0),
+        }
+    }
+
+    /// Shadow rays cast through this instance (queries answered without
+    /// a ray, because nothing in the scene casts shadows, are not counted).
+    #[must_use]
+    pub fn cast(&self) -> u64 {
+        self.cast.load(std::sync::atomic::Ordering::Relaxed)
     }
 }
 
@@ -240,6 +254,7 @@ impl Visibility for ShadowRays<'_, '_> {
         if !a.any_caster {
             return Rgb::WHITE;
         }
+        self.cast.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         let ray = Ray {
             origin,
             dir,

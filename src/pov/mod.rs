@@ -352,7 +352,11 @@ fn write_mesh2(o: &mut String, tri: &TriScene, object: usize, abridged: bool) ->
         faces.push(idx);
     }
     let smooth = range.clone().any(|t| tri.tri_normals[t][0] != NO_INDEX);
-    let has_uv = range.clone().all(|t| tri.tri_uvs[t][0] != NO_INDEX) && !range.is_empty();
+    // uvs only where the material reads them (the same rule as the plan),
+    // so the export does not depend on whether the plan dropped them.
+    let has_uv = range.clone().all(|t| tri.tri_uvs[t][0] != NO_INDEX)
+        && !range.is_empty()
+        && tri.materials[usize::from(info.material)].needs_uv();
     let _ = writeln!(o, "mesh2 {{");
     array(
         o,

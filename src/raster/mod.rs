@@ -88,6 +88,14 @@ pub struct RasterStats {
     pub depth_writes: u64,
     /// Samples tested.
     pub fragments: u64,
+    /// Triangles culled from primary visibility by the plan.
+    pub culled: Culled,
+    /// A BVH was built for shadow rays.
+    pub shadow_bvh: bool,
+    /// Shadow rays cast by the shading pass.
+    pub shadow_rays: u64,
+    /// Shadow maps built (one per parallel light, six per point light).
+    pub shadow_maps: usize,
 }
 
 /// A record of a (sub-)triangle to scan: snapped vertices, its triangle
@@ -211,8 +219,11 @@ impl DepthMap {
 #[must_use]
 pub fn render(scene: &TriScene, opts: &RasterOptions) -> (Frame, RasterStats) {
     let vis = visibility(scene, opts);
-    let stats = vis.stats;
-    let frame = shade_pass(scene, opts, &vis);
+    let mut stats = vis.stats;
+    let (frame, shadow_rays, shadow_maps) = shade_pass(scene, opts, &vis);
+    stats.shadow_bvh = opts.shadows_needed && opts.shadows == ShadowMode::Rays;
+    stats.shadow_rays = shadow_rays;
+    stats.shadow_maps = shadow_maps;
     (frame, stats)
 }
 
@@ -259,7 +270,7 @@ pub fn visibility(scene: &TriScene, opts: &RasterOptions) -> VisibilityBuffers {
     // Setup: per chunk of triangles, in id order.
     let chunk = 4096usize;
     let n_tris = scene.len();
-    let chunks: Vec<Vec<Record>> = (0..n_tris.div_ceil(chunk))
+    let chunks: Vec<(Vec<Record>, Culled)> = (0..n_tris.div_ceil(chunk))
         .into_par_iter()
         .map(|c| {
             records(
@@ -277,7 +288,11 @@ pub fn visibility(scene: &TriScene, opts: &RasterOptions) -> VisibilityBuffers {
             )
         })
         .collect();
-    let records: Vec<&Record> = chunks.iter().flatten().collect();
+    let records: Vec<&Record> = chunks.iter().flat_map(|c| &c.0).collect();
+    let culled = chunks.iter().fold(Culled::default(), |a, (_, c)| Culled {
+        frustum: a.frustum + c.frustum,
+        backface: a.backface + c.backface,
+    });
 
     // Bin records to bands.
     let bands = sh.div_ceil(BAND) as usize;
@@ -346,6 +361,10 @@ pub fn visibility(scene: &TriScene, opts: &RasterOptions) -> VisibilityBuffers {
         records: records.len(),
         depth_writes: counters.iter().map(|c| c.0).sum(),
         fragments: counters.iter().map(|c| c.1).sum(),
+        culled,
+        shadow_bvh: false,
+        shadow_rays: 0,
+        shadow_maps: 0,
     };
     VisibilityBuffers {
         key,
@@ -363,19 +382,18 @@ fn setup_triangle(
     poly: &mut Vec<HVert>,
     tmp: &mut Vec<HVert>,
     out: &mut Vec<Record>,
-) {
+) -> bool {
     let near = -ctx.clip_planes[0].c[4];
     let guard_ok = |p: &(f64, f64)| p.0.abs() < GUARD_PX && p.1.abs() < GUARD_PX;
     // The common case: in front of the near plane and inside the guard band.
     if v.iter().all(|p| p.z >= near) {
         let s = [v[0].screen(), v[1].screen(), v[2].screen()];
         if s.iter().all(guard_ok) {
-            push_snapped(&s, tri, cull_back, ctx, out);
-            return;
+            return push_snapped(&s, tri, cull_back, ctx, out);
         }
     }
     if v.iter().all(|p| p.z < near) {
-        return;
+        return false;
     }
     poly.clear();
     poly.extend_from_slice(v);
@@ -386,12 +404,13 @@ fn setup_triangle(
         clip_polygon(poly, plane, tmp);
         std::mem::swap(poly, tmp);
         if poly.len() < 3 {
-            return;
+            return false;
         }
     }
     let s0 = poly[0].screen();
+    let mut culled = false;
     for k in 1..poly.len() - 1 {
-        push_snapped(
+        culled |= push_snapped(
             &[s0, poly[k].screen(), poly[k + 1].screen()],
             tri,
             cull_back,
@@ -399,6 +418,7 @@ fn setup_triangle(
             out,
         );
     }
+    culled
 }
 
 /// Snaps a screen triangle and records it if it can cover a sample.
@@ -408,16 +428,19 @@ fn push_snapped(
     cull_back: bool,
     ctx: &SetupCtx<'_>,
     out: &mut Vec<Record>,
-) {
+) -> bool {
     let s = p.map(|(x, y)| (Sub8::snap(x).0, Sub8::snap(y).0));
     let area2 = doubled_area(&s);
     let back = area2 >= 0;
-    if area2 == 0 || (cull_back && back) {
-        return;
+    if area2 == 0 {
+        return false;
+    }
+    if cull_back && back {
+        return true;
     }
     let (rows, cols) = bbox_samples(&s, ctx.grid, ctx.size);
     if rows.is_empty() || cols.is_empty() {
-        return;
+        return false;
     }
     #[expect(
         clippy::cast_possible_truncation,
@@ -431,6 +454,7 @@ fn push_snapped(
         back,
         rule: ctx.rule,
     });
+    false
 }
 
 /// The planes `λ_i = b_i/w` (2-D homogeneous rasterization, Olano & Greer
@@ -611,7 +635,7 @@ fn records(
     grid: &SampleGrid,
     rule: FillRule,
     cull: impl Fn(usize) -> (bool, bool),
-) -> Vec<Record> {
+) -> (Vec<Record>, Culled) {
     let cam = &scene.camera;
     let ctx = SetupCtx {
         clip_planes: planes(
@@ -627,16 +651,29 @@ fn records(
     let mut out = Vec::with_capacity(range.len());
     let mut poly = Vec::with_capacity(8);
     let mut tmp = Vec::with_capacity(8);
+    let mut culled = Culled::default();
     for t in range {
         let (skip, cull_back) = cull(scene.tri_object[t] as usize);
         if skip {
+            culled.frustum += 1;
             continue;
         }
         let v = scene.tris[t].map(|i| hv[i as usize]);
         let tri = u32::try_from(t).unwrap_or(u32::MAX);
-        setup_triangle(&v, tri, cull_back, &ctx, &mut poly, &mut tmp, &mut out);
+        if setup_triangle(&v, tri, cull_back, &ctx, &mut poly, &mut tmp, &mut out) {
+            culled.backface += 1;
+        }
     }
-    out
+    (out, culled)
+}
+
+/// Triangles the plan's culling removed from primary visibility.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Culled {
+    /// Triangles of objects entirely outside the view frustum.
+    pub frustum: usize,
+    /// Back faces of closed objects seen from outside.
+    pub backface: usize,
 }
 
 /// Calls `visit(tri, sx, sy, front)` for every sample the coverage rule
@@ -647,9 +684,10 @@ pub fn cover(scene: &TriScene, backface_cull: bool, mut visit: impl FnMut(u32, u
     let cam = &scene.camera;
     let grid = SampleGrid::new(cam.samples());
     let hv = homogeneous(scene, Perturb::default());
-    for r in records(scene, &hv, 0..scene.len(), &grid, FillRule::TopLeft, |_| {
+    let (records, _) = records(scene, &hv, 0..scene.len(), &grid, FillRule::TopLeft, |_| {
         (false, backface_cull)
-    }) {
+    });
+    for r in records {
         let Some(st) = r.snapped() else { continue };
         st.for_each_span(
             &grid,
@@ -688,9 +726,10 @@ pub fn measure_drift(scene: &TriScene) -> Drift {
     let perspective = matches!(cam.projection(), Projection::Perspective { .. });
     let n = f64::from(grid.n);
     let mut drift = Drift::default();
-    for r in records(scene, &hv, 0..scene.len(), &grid, FillRule::TopLeft, |_| {
+    let (records, _) = records(scene, &hv, 0..scene.len(), &grid, FillRule::TopLeft, |_| {
         (false, false)
-    }) {
+    });
+    for r in records {
         let mut span_len = 0u32;
         let mut last_row = u32::MAX;
         walk_record(
@@ -731,9 +770,15 @@ pub fn measure_drift(scene: &TriScene) -> Drift {
     drift
 }
 
-fn shade_pass(scene: &TriScene, opts: &RasterOptions, vis: &VisibilityBuffers) -> Frame {
+/// The deferred shading pass; returns the frame, the shadow rays cast and
+/// the shadow maps built.
+fn shade_pass(
+    scene: &TriScene,
+    opts: &RasterOptions,
+    vis: &VisibilityBuffers,
+) -> (Frame, u64, usize) {
     let cam = &scene.camera;
-    let (sw, sh) = (cam.sample_width(), cam.sample_height());
+    let sw = cam.sample_width();
     let ctx = ShadeContext {
         materials: &scene.materials,
         lights: &scene.lights,
@@ -741,34 +786,31 @@ fn shade_pass(scene: &TriScene, opts: &RasterOptions, vis: &VisibilityBuffers) -
         gate_eps: opts.gate_eps,
         shadows: opts.shadows_needed,
     };
-    let accel;
-    let rays;
-    let map;
-    let visibility: &dyn Visibility = if !opts.shadows_needed {
-        &Unoccluded
-    } else {
-        match opts.shadows {
-            ShadowMode::Rays => {
-                accel = Accel::new(scene, AccelOptions::default());
-                rays = ShadowRays::new(&accel);
-                &rays
-            }
-            ShadowMode::Map(res) => {
-                map = shadow_map::ShadowMaps::new(scene, res);
-                &map
-            }
-        }
+    // Shadows: nothing when the plan says no shadow can fall; else a BVH
+    // for shadow rays (one `ShadowRays` per row, so its counter is never
+    // shared) or the shadow maps.
+    let accel = (opts.shadows_needed && opts.shadows == ShadowMode::Rays)
+        .then(|| Accel::new(scene, AccelOptions::default()));
+    let map = match (opts.shadows_needed, opts.shadows) {
+        (true, ShadowMode::Map(res)) => Some(shadow_map::ShadowMaps::new(scene, res)),
+        _ => None,
     };
     let mut frame = Frame::new(cam.width(), cam.height(), cam.samples(), scene.background);
     let w = sw as usize;
-    frame
+    let shadow_rays: u64 = frame
         .sample_color
         .par_chunks_mut(w)
         .zip(frame.depth.par_chunks_mut(w))
         .zip(frame.id.par_chunks_mut(w))
         .zip(frame.flags.par_chunks_mut(w))
         .enumerate()
-        .for_each(|(sy, (((color, depth), ids), flags))| {
+        .map(|(sy, (((color, depth), ids), flags))| {
+            let rays = accel.as_ref().map(ShadowRays::new);
+            let visibility: &dyn Visibility = match (&rays, &map) {
+                (Some(r), _) => r,
+                (None, Some(m)) => m,
+                (None, None) => &Unoccluded,
+            };
             let sy = u32::try_from(sy).unwrap_or(0);
             for sx in 0..sw {
                 let i = (sy as usize) * w + sx as usize;
@@ -793,8 +835,10 @@ fn shade_pass(scene: &TriScene, opts: &RasterOptions, vis: &VisibilityBuffers) -
                 ids[sx as usize] = tri;
                 flags[sx as usize] = shaded.flags;
             }
-        });
-    let _ = sh;
+            rays.as_ref().map_or(0, ShadowRays::cast)
+        })
+        .sum();
     frame.resolve();
-    frame
+    let maps = map.as_ref().map_or(0, shadow_map::ShadowMaps::count);
+    (frame, shadow_rays, maps)
 }

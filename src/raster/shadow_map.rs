@@ -152,6 +152,12 @@ pub struct ShadowMaps {
 }
 
 impl ShadowMaps {
+    /// How many maps were rendered.
+    #[must_use]
+    pub fn count(&self) -> usize {
+        self.maps.iter().map(Vec::len).sum()
+    }
+
     /// Renders the maps at `res`×`res` texels each.
     #[must_use]
     pub fn new(scene: &TriScene, res: u32) -> ShadowMaps {

@@ -10,6 +10,8 @@ mod cli;
 mod differential;
 /// Regression images per backend (golden/raster, golden/ray).
 mod golden;
+/// The render plan: invariance with and without it, and each skip firing.
+mod plan;
 /// Both backends against the stored POV-Ray references.
 mod povray;
 /// The rasterizer: exact coverage, drift, depth formats, near clipping.
