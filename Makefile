@@ -2,7 +2,7 @@
 CARGO ?= cargo
 export CARGO_TERM_COLOR ?= never
 
-.PHONY: test lint unit golden golden-check bless bench fuzz doc clean
+.PHONY: test lint unit golden golden-check bless bench bench-report scaling peers fuzz doc clean
 
 ## The whole test suite: formatting, lints, unit, integration and doc
 ## tests, then (where POV-Ray is installed) the check that every stored
@@ -11,6 +11,7 @@ test: lint unit golden-check
 
 lint:
 	$(CARGO) fmt --all --check
+	$(CARGO) fmt --manifest-path peers/Cargo.toml --check
 	$(CARGO) clippy --all-targets -- -D warnings
 
 unit:
@@ -40,6 +41,22 @@ bless:
 ## Benchmarks (release profile).
 bench:
 	$(CARGO) bench
+
+## Run time against error on every bundled scene: results.csv, one
+## time-against-error plot per scene and plan_savings.svg.
+bench-report:
+	$(CARGO) run --release -- bench --out target/rendiff-bench
+
+## Time against triangle count and resolution, with the fitted growth.
+scaling:
+	$(CARGO) run --release -- bench --scaling --out target/rendiff-scaling
+
+## rendiff beside Embree 3 (primary rays) and POV-Ray 3.7 (whole renders);
+## needs `apt-get install libembree-dev povray`. Not part of `make test`.
+peers:
+	$(CARGO) clippy --release --manifest-path peers/Cargo.toml -- -D warnings
+	$(CARGO) run --release --manifest-path peers/Cargo.toml -- embree
+	$(CARGO) run --release --manifest-path peers/Cargo.toml -- povray
 
 doc:
 	RUSTDOCFLAGS="-D warnings" $(CARGO) doc --no-deps

@@ -271,3 +271,61 @@ fn raster_fill_1080p_2x2(bencher: Bencher) {
         ))
         .bench(|| p.install(|| black_box(raster::visibility(&t, &opts))));
 }
+
+/// Where a flat loop stops beating a BVH (`plan::FLAT_LOOP_MAX_TRIANGLES`):
+/// `n` small triangles scattered in a unit cube, a 256×256 frame of
+/// primary rays, structure build included (one frame's whole cost).
+#[divan::bench(args = [2, 4, 8, 12, 16, 32, 64], consts = [false, true], sample_count = 20)]
+fn flat_loop_vs_bvh<const BVH: bool>(bencher: Bencher, n: usize) {
+    use rendiff::camera::{Camera, Projection};
+    use rendiff::math::{DVec3, Vec3};
+    let cam = Camera::new(
+        DVec3::new(0.5, 0.5, 3.0),
+        DVec3::new(0.5, 0.5, 0.5),
+        DVec3::Y,
+        Projection::Perspective { tan_half_fov: 0.25 },
+        256,
+        256,
+        1,
+        0.01,
+        100.0,
+    )
+    .unwrap();
+    // A fixed pseudo-random layout (SplitMix64).
+    let mut state = 0x9E37_79B9_7F4A_7C15u64;
+    let mut next = move || {
+        state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = state;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let tris: Vec<[Vec3; 3]> = (0..n)
+        .map(|_| {
+            let c = Vec3::new(next(), next(), next());
+            let s = 0.15;
+            [
+                c,
+                c + Vec3::new(s * next(), s * next(), 0.0),
+                c + Vec3::new(-s * next(), s * next(), s * next()),
+            ]
+        })
+        .collect();
+    let scene = TriScene::from_triangles(cam, &tris);
+    let rays: Vec<Ray> = (0..256)
+        .flat_map(|y| (0..256).map(move |x| (x, y)))
+        .map(|(x, y)| cam.sample_ray(x, y))
+        .collect();
+    bencher.counter(ItemsCount::new(rays.len())).bench(|| {
+        let accel = Accel::new(
+            &scene,
+            AccelOptions {
+                bvh: BVH,
+                ..AccelOptions::default()
+            },
+        );
+        rays.iter()
+            .filter(|r| accel.intersect(black_box(r)).is_some())
+            .count()
+    });
+}

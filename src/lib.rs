@@ -25,6 +25,7 @@
 #![warn(missing_docs, missing_debug_implementations)]
 
 pub mod accel;
+pub mod bench;
 pub mod camera;
 pub mod color;
 pub mod compare;
@@ -69,7 +70,7 @@ pub enum Backend {
 
 impl fmt::Display for Backend {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(match self {
+        f.pad(match self {
             Backend::Raster => "raster",
             Backend::Ray => "ray",
         })

@@ -12,9 +12,12 @@ use crate::options::BvhMode;
 use crate::tri_scene::{NO_INDEX, TriScene};
 
 /// Scenes with at most this many triangles use a flat loop instead of a
-/// BVH when `bvh = "auto"`: measured with `cargo bench --bench bvh_threshold`
-/// (see benches/README.md).
-pub const FLAT_LOOP_MAX_TRIANGLES: usize = 8;
+/// BVH when `bvh = "auto"`. Measured with `cargo bench --bench render --
+/// flat_loop_vs_bvh` (a 256×256 frame of primary rays, build included;
+/// medians): 16 triangles 2.20 ms flat / 2.68 ms BVH, 32 triangles
+/// 3.74 / 3.83 ms, 64 triangles 7.25 / 5.12 ms. Up to 8 triangles the SAH
+/// itself makes one leaf, so both are the same loop there.
+pub const FLAT_LOOP_MAX_TRIANGLES: usize = 32;
 
 /// One decision of the plan.
 #[derive(Clone, Debug, PartialEq, Eq)]

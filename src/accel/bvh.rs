@@ -14,7 +14,7 @@
 
 use glam::Vec4;
 
-use super::triangle::{RayPrecomp, TriHit, intersect};
+use super::triangle::{RayPrecomp, TriHit, TriPack, candidates, intersect};
 use crate::math::{Aabb, Ray, Vec3, gamma};
 
 /// Child slot encoding: the high bit marks a leaf.
@@ -40,10 +40,14 @@ pub struct Node4 {
     max_y: Vec4,
     min_z: Vec4,
     max_z: Vec4,
-    /// Inner node index, `LEAF | first` or `EMPTY`.
+    /// Inner node index, `LEAF | first pack` or `EMPTY`.
     child: [u32; 4],
-    /// Triangle count of leaf children.
-    count: [u32; 4],
+    /// Bit k set when child k exists: an empty slot's box (all +∞) would
+    /// pass the slab test for a ray with positive direction components
+    /// and no far bound.
+    used: u32,
+    /// Padding: a node is two 64-byte cache lines.
+    _pad: [u32; 3],
 }
 
 /// The BVH: nodes and triangle data in leaf order.
@@ -53,10 +57,13 @@ pub struct Bvh {
     /// The root: an inner node index or a leaf encoding.
     root: u32,
     root_count: u32,
-    /// Vertices of each triangle, in leaf order.
-    verts: Vec<[Vec3; 3]>,
-    /// Triangle id (in the `TriScene`) of each leaf-order triangle.
+    /// The triangles in leaf order, four to a pack; a leaf is a run of
+    /// packs.
+    packs: Vec<TriPack>,
+    /// Triangle id (in the `TriScene`) of each lane: `ids[4·pack + lane]`.
     ids: Vec<u32>,
+    /// Triangles.
+    triangles: usize,
     bounds: Aabb,
     depth: u32,
 }
@@ -155,6 +162,12 @@ impl BNode {
     }
 }
 
+/// What leaf emission needs: the ids in leaf order and the vertices.
+struct Leaves<'a, F> {
+    order: &'a [u32],
+    tri: &'a F,
+}
+
 /// Binary depth beyond which splits are object medians, whatever the SAH
 /// says: it bounds the tree depth (and the traversal stack) for any input.
 const SAH_DEPTH_LIMIT: u32 = 40;
@@ -209,11 +222,10 @@ fn build_binary(
             bin_count[axis][b[axis]] += 1;
         }
     }
-    #[expect(
-        clippy::cast_precision_loss,
-        reason = "counts are far below 2^24 per bin evaluation"
-    )]
-    let leaf_cost = n as f32;
+    // Triangles are tested four at a time: a leaf costs its packs.
+    #[expect(clippy::cast_precision_loss, reason = "pack counts below 2^24")]
+    let packs = |k: u32| k.div_ceil(4) as f32;
+    let leaf_cost = packs(u32::try_from(n).unwrap_or(u32::MAX));
     let parent_area = bounds.half_area().max(f32::MIN_POSITIVE);
     let mut best: Option<(usize, usize, f32)> = None; // axis, split bin, cost
     for axis in 0..3 {
@@ -239,9 +251,8 @@ fn build_binary(
             if cnt == 0 || right_count[b] == 0 {
                 continue;
             }
-            #[expect(clippy::cast_precision_loss, reason = "counts below 2^24")]
             let cost = TRAVERSAL_COST
-                + (acc.half_area() * cnt as f32 + right_area[b] * right_count[b] as f32)
+                + (acc.half_area() * packs(cnt) + right_area[b] * packs(right_count[b]))
                     / parent_area;
             if best.is_none_or(|(_, _, c)| cost < c) {
                 best = Some((axis, b, cost));
@@ -378,25 +389,63 @@ impl Bvh {
             build_binary(&mut prims, 0, 0, b)
         };
         bvh.bounds = tree.bounds();
-        bvh.ids = prims.iter().map(|p| ids[p.index() as usize]).collect();
-        bvh.verts = bvh.ids.iter().map(|&id| tri(id)).collect();
+        bvh.triangles = ids.len();
+        let order: Vec<u32> = prims.iter().map(|p| ids[p.index() as usize]).collect();
+        let leaves = Leaves {
+            order: &order,
+            tri: &tri,
+        };
         match &tree {
             BNode::Leaf { start, count, .. } => {
-                bvh.root = LEAF | u32::try_from(*start).unwrap_or(0);
+                bvh.root = LEAF | bvh.emit_leaf(&leaves, *start, *count);
                 bvh.root_count = u32::try_from(*count).unwrap_or(0);
                 bvh.depth = 0;
             }
             BNode::Inner { .. } => {
                 bvh.root = 0;
                 bvh.nodes.push(empty_node());
-                bvh.depth = bvh.collapse(&tree, 0);
+                bvh.depth = bvh.collapse(&tree, 0, &leaves);
             }
         }
         bvh
     }
 
-    /// Fills node `slot` from the binary subtree `node`; returns the depth.
-    fn collapse(&mut self, node: &BNode, slot: usize) -> u32 {
+    /// Appends the packs of the leaf holding `order[start..start + count]`;
+    /// returns the index of its first pack.
+    fn emit_leaf<F: Fn(u32) -> [Vec3; 3]>(
+        &mut self,
+        leaves: &Leaves<'_, F>,
+        start: usize,
+        count: usize,
+    ) -> u32 {
+        let first = u32::try_from(self.packs.len()).unwrap_or(u32::MAX);
+        for chunk in leaves.order[start..start + count].chunks(4) {
+            let mut pack = TriPack::EMPTY;
+            pack.last = false;
+            for (lane, &id) in chunk.iter().enumerate() {
+                pack.set(lane, (leaves.tri)(id));
+                self.ids.push(id);
+            }
+            for _ in chunk.len()..4 {
+                self.ids.push(u32::MAX);
+            }
+            pack.lanes = u32::try_from(chunk.len()).unwrap_or(4);
+            self.packs.push(pack);
+        }
+        if let Some(p) = self.packs.last_mut() {
+            p.last = true;
+        }
+        first
+    }
+
+    /// Fills node `slot` from the binary subtree `node` (its leaves become
+    /// packs, in depth-first order); returns the depth.
+    fn collapse<F: Fn(u32) -> [Vec3; 3]>(
+        &mut self,
+        node: &BNode,
+        slot: usize,
+        leaves: &Leaves<'_, F>,
+    ) -> u32 {
         // Gather up to four children by opening the largest inner child.
         let mut kids: [&BNode; 4] = [node; 4];
         let mut len = match node {
@@ -436,8 +485,7 @@ impl Bvh {
             set_lane(&mut n, k, b);
             match kid {
                 BNode::Leaf { start, count, .. } => {
-                    n.child[k] = LEAF | u32::try_from(*start).unwrap_or(0);
-                    n.count[k] = u32::try_from(*count).unwrap_or(0);
+                    n.child[k] = LEAF | self.emit_leaf(leaves, *start, *count);
                 }
                 BNode::Inner { .. } => {
                     let idx = self.nodes.len();
@@ -448,9 +496,10 @@ impl Bvh {
                 }
             }
         }
+        n.used = (1 << len) - 1;
         self.nodes[slot] = n;
         for &(k, idx) in &pending[..np] {
-            depth = depth.max(self.collapse(kids[k], idx));
+            depth = depth.max(self.collapse(kids[k], idx, leaves));
         }
         depth + 1
     }
@@ -472,12 +521,12 @@ impl Bvh {
             .count()
             + usize::from(self.nodes.is_empty() && self.root != EMPTY);
         BvhStats {
-            triangles: self.ids.len(),
+            triangles: self.triangles,
             nodes: self.nodes.len(),
             leaves,
             depth: self.depth,
             bytes: self.nodes.len() * std::mem::size_of::<Node4>()
-                + self.verts.len() * std::mem::size_of::<[Vec3; 3]>()
+                + self.packs.len() * std::mem::size_of::<TriPack>()
                 + self.ids.len() * 4,
         }
     }
@@ -489,21 +538,18 @@ impl Bvh {
         let pre = RayPrecomp::new(ray);
         let mut best: Option<BvhHit> = None;
         let mut t_best = ray.t_max;
-        self.traverse(ray, &mut t_best, true, |first, count, t_best| {
-            for i in first..first + count {
-                if let Some(TriHit { t, b }) = intersect(&pre, &self.verts[i], ray.t_min, *t_best) {
-                    let id = self.ids[i];
-                    let better = match best {
-                        None => true,
-                        Some(h) => t < h.t || (t == h.t && id < h.id),
-                    };
-                    if better {
-                        best = Some(BvhHit { t, id, b });
-                        *t_best = t;
-                    }
+        self.traverse(ray, &mut t_best, true, |first, t_best| {
+            self.leaf_hits(&pre, first, ray.t_min, t_best, |id, h, t_best| {
+                let better = match best {
+                    None => true,
+                    Some(b) => h.t < b.t || (h.t == b.t && id < b.id),
+                };
+                if better {
+                    best = Some(BvhHit { t: h.t, id, b: h.b });
+                    *t_best = h.t;
                 }
-            }
-            false
+                false
+            })
         });
         best
     }
@@ -514,37 +560,60 @@ impl Bvh {
     pub fn for_each_hit(&self, ray: &Ray, mut visit: impl FnMut(u32, TriHit) -> bool) {
         let pre = RayPrecomp::new(ray);
         let mut t_max = ray.t_max;
-        self.traverse(ray, &mut t_max, false, |first, count, t_max| {
-            for i in first..first + count {
-                if let Some(h) = intersect(&pre, &self.verts[i], ray.t_min, *t_max)
-                    && visit(self.ids[i], h)
+        self.traverse(ray, &mut t_max, false, |first, t_max| {
+            self.leaf_hits(&pre, first, ray.t_min, t_max, |id, h, _| visit(id, h))
+        });
+    }
+
+    /// Tests the leaf starting at pack `first`: four triangles at a time
+    /// for the edge test ([`candidates`]), then the survivors one by one;
+    /// `hit(id, hit, t_max)` may shrink `t_max` and returns `true` to stop.
+    #[inline]
+    fn leaf_hits(
+        &self,
+        pre: &RayPrecomp,
+        first: usize,
+        t_min: f32,
+        t_max: &mut f32,
+        mut hit: impl FnMut(u32, TriHit, &mut f32) -> bool,
+    ) -> bool {
+        let mut p = first;
+        loop {
+            let pack = &self.packs[p];
+            let mut lanes = candidates(pre, pack);
+            while lanes != 0 {
+                let lane = lanes.trailing_zeros() as usize;
+                lanes &= lanes - 1;
+                if let Some(h) = intersect(pre, &pack.triangle(lane), t_min, *t_max)
+                    && hit(self.ids[4 * p + lane], h, t_max)
                 {
                     return true;
                 }
             }
-            false
-        });
+            if pack.last {
+                return false;
+            }
+            p += 1;
+        }
     }
 
-    /// Walks the tree; `leaf(first, count, t_max)` tests a leaf and may
-    /// shrink `t_max`; returning `true` stops the walk.
+    /// Walks the tree; `leaf(first_pack, t_max)` tests a leaf and may
+    /// shrink `t_max`; returning `true` stops the walk. With `ordered`,
+    /// children are visited nearest first (closest hit); without, in any
+    /// order (any hit, all hits).
     #[inline]
     fn traverse(
         &self,
         ray: &Ray,
         t_max: &mut f32,
         ordered: bool,
-        mut leaf: impl FnMut(usize, usize, &mut f32) -> bool,
+        mut leaf: impl FnMut(usize, &mut f32) -> bool,
     ) {
         if self.root == EMPTY {
             return;
         }
         if self.root & LEAF != 0 {
-            leaf(
-                (self.root & !LEAF) as usize,
-                self.root_count as usize,
-                t_max,
-            );
+            leaf((self.root & !LEAF) as usize, t_max);
             return;
         }
         // A zero direction component would give 0·∞ = NaN in the slab test:
@@ -570,65 +639,95 @@ impl Bvh {
         let (ix, iy, iz) = (Vec4::splat(inv.x), Vec4::splat(inv.y), Vec4::splat(inv.z));
         let grow = 1.0 + 2.0 * gamma(3);
         let t_min4 = Vec4::splat(ray.t_min);
-        // Stack of (child encoding, count, t_near). The build bounds the
-        // binary depth by SAH_DEPTH_LIMIT + log2(n) ≤ 64 for n < 2^24, and a
-        // visit pushes at most 3 more entries than it pops.
-        let mut stack: [(u32, u32, f32); 256] = [(0, 0, 0.0); 256];
+        // The stack holds (t_near bits << 32 | child). A visit pops one
+        // entry and pushes at most three (the nearest child is descended
+        // into directly), so 3·depth + 1 entries suffice; the usual trees
+        // fit the small array, which is cheap to set up per ray.
+        let need = 3 * self.depth as usize + 1;
+        let mut small = [0u64; 64];
+        let mut big = Vec::new();
+        let stack: &mut [u64] = if need <= small.len() {
+            &mut small
+        } else {
+            big.resize(need, 0);
+            &mut big
+        };
         let mut sp = 0usize;
-        stack[0] = (self.root, 0, ray.t_min);
-        sp += 1;
-        while sp > 0 {
-            sp -= 1;
-            let (child, count, t_near) = stack[sp];
-            // t_near carries rounding error too: compare it with t_max
-            // enlarged like t_far, so a box holding a hit at exactly t_max
-            // (a tie, decided by id) is still visited.
-            if t_near > *t_max * grow {
-                continue;
-            }
-            if child & LEAF != 0 {
-                if leaf((child & !LEAF) as usize, count as usize, t_max) {
+        let mut node = self.root;
+        loop {
+            if node & LEAF != 0 {
+                if leaf((node & !LEAF) as usize, t_max) {
                     return;
                 }
-                continue;
-            }
-            let n = &self.nodes[child as usize];
-            let tx0 = (n.min_x - ox) * ix;
-            let tx1 = (n.max_x - ox) * ix;
-            let ty0 = (n.min_y - oy) * iy;
-            let ty1 = (n.max_y - oy) * iy;
-            let tz0 = (n.min_z - oz) * iz;
-            let tz1 = (n.max_z - oz) * iz;
-            let tn = tx0.min(tx1).max(ty0.min(ty1)).max(tz0.min(tz1)).max(t_min4);
-            let tf = tx0.max(tx1).min(ty0.max(ty1)).min(tz0.max(tz1)) * grow;
-            let tf = tf.min(Vec4::splat(*t_max * grow));
-            let mask = tn.cmple(tf).bitmask();
-            if mask == 0 {
-                continue;
-            }
-            let tn = tn.to_array();
-            // Push hit children far to near so the nearest is popped first.
-            let mut order: [(f32, usize); 4] = [(0.0, 0); 4];
-            let mut m = 0;
-            for (k, &t) in tn.iter().enumerate() {
-                if mask & (1 << k) != 0 {
-                    order[m] = (t, k);
-                    m += 1;
-                }
-            }
-            if ordered {
-                // Insertion sort, descending t_near.
-                for a in 1..m {
-                    let mut b = a;
-                    while b > 0 && order[b - 1].0 < order[b].0 {
-                        order.swap(b - 1, b);
-                        b -= 1;
+            } else {
+                let n = &self.nodes[node as usize];
+                let tx0 = (n.min_x - ox) * ix;
+                let tx1 = (n.max_x - ox) * ix;
+                let ty0 = (n.min_y - oy) * iy;
+                let ty1 = (n.max_y - oy) * iy;
+                let tz0 = (n.min_z - oz) * iz;
+                let tz1 = (n.max_z - oz) * iz;
+                let tn = tx0.min(tx1).max(ty0.min(ty1)).max(tz0.min(tz1)).max(t_min4);
+                let tf = tx0.max(tx1).min(ty0.max(ty1)).min(tz0.max(tz1)) * grow;
+                let tf = tf.min(Vec4::splat(*t_max * grow));
+                let mut mask = tn.cmple(tf).bitmask() & n.used;
+                if mask != 0 {
+                    let tn = tn.to_array();
+                    // The nearest hit child is descended into; the others
+                    // are pushed far to near (ordered) or as they come.
+                    let mut near = mask.trailing_zeros() as usize;
+                    mask &= mask - 1;
+                    if mask == 0 {
+                        node = n.child[near];
+                        continue;
                     }
+                    let mut rest = [0usize; 3];
+                    let mut m = 0;
+                    while mask != 0 {
+                        let k = mask.trailing_zeros() as usize;
+                        mask &= mask - 1;
+                        if ordered && tn[k] < tn[near] {
+                            rest[m] = near;
+                            near = k;
+                        } else {
+                            rest[m] = k;
+                        }
+                        m += 1;
+                    }
+                    if ordered {
+                        // Descending t_near: the nearest of the rest is popped first.
+                        for a in 1..m {
+                            let mut b = a;
+                            while b > 0 && tn[rest[b - 1]] < tn[rest[b]] {
+                                rest.swap(b - 1, b);
+                                b -= 1;
+                            }
+                        }
+                    }
+                    for &k in &rest[..m] {
+                        stack[sp] = (u64::from(tn[k].to_bits()) << 32) | u64::from(n.child[k]);
+                        sp += 1;
+                    }
+                    node = n.child[near];
+                    continue;
                 }
             }
-            for &(t, k) in &order[..m] {
-                stack[sp] = (n.child[k], n.count[k], t);
-                sp += 1;
+            // Pop the next box that can still hold a hit. Its t_near
+            // carries rounding error too: compare it with t_max enlarged
+            // like t_far, so a box holding a hit at exactly t_max (a tie,
+            // decided by id) is still visited.
+            loop {
+                if sp == 0 {
+                    return;
+                }
+                sp -= 1;
+                let e = stack[sp];
+                #[expect(clippy::cast_possible_truncation, reason = "unpacking the two halves")]
+                let (t_near, child) = (f32::from_bits((e >> 32) as u32), e as u32);
+                if t_near <= *t_max * grow {
+                    node = child;
+                    break;
+                }
             }
         }
     }
@@ -644,7 +743,8 @@ fn empty_node() -> Node4 {
         min_z: inf,
         max_z: inf,
         child: [EMPTY; 4],
-        count: [0; 4],
+        used: 0,
+        _pad: [0; 3],
     }
 }
 

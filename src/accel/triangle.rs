@@ -11,6 +11,8 @@
 //! except exactly on the shared edge. A zero edge function is recomputed in
 //! `f64`, where the products of two `f32` values are exact.
 
+use glam::Vec4;
+
 use crate::math::{Ray, Vec3, gamma};
 
 /// Per-ray constants of the watertight test.
@@ -22,6 +24,10 @@ pub struct RayPrecomp {
     pub k: [usize; 3],
     /// Shear constants `(Sx, Sy, Sz)`.
     pub s: Vec3,
+    /// The origin's coordinates, each in four lanes (for [`candidates`]).
+    o4: [Vec4; 3],
+    /// `Sx` and `Sy` in four lanes.
+    s4: [Vec4; 2],
 }
 
 impl RayPrecomp {
@@ -43,12 +49,92 @@ impl RayPrecomp {
         if d[kz] < 0.0 {
             std::mem::swap(&mut kx, &mut ky);
         }
+        let s = Vec3::new(d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]);
         RayPrecomp {
             origin: ray.origin,
             k: [kx, ky, kz],
-            s: Vec3::new(d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]),
+            s,
+            o4: [
+                Vec4::splat(ray.origin.x),
+                Vec4::splat(ray.origin.y),
+                Vec4::splat(ray.origin.z),
+            ],
+            s4: [Vec4::splat(s.x), Vec4::splat(s.y)],
         }
     }
+}
+
+/// Four triangles as structure of arrays: `v[corner][axis]` holds that
+/// coordinate of the four triangles, one per lane. Leaves of the BVH are
+/// runs of packs; `lanes` says how many lanes are triangles and `last`
+/// whether the leaf ends here.
+#[derive(Clone, Copy, Debug)]
+pub struct TriPack {
+    /// Corner coordinates, `v[corner][axis]`, a triangle per lane.
+    pub v: [[Vec4; 3]; 3],
+    /// Lanes in use (1 … 4).
+    pub lanes: u32,
+    /// The last pack of its leaf.
+    pub last: bool,
+}
+
+impl TriPack {
+    /// An empty pack (no lanes).
+    pub const EMPTY: TriPack = TriPack {
+        v: [[Vec4::ZERO; 3]; 3],
+        lanes: 0,
+        last: true,
+    };
+
+    /// The triangle in `lane`.
+    #[must_use]
+    #[inline]
+    pub fn triangle(&self, lane: usize) -> [Vec3; 3] {
+        self.v
+            .map(|c| Vec3::new(c[0][lane], c[1][lane], c[2][lane]))
+    }
+
+    /// Puts a triangle in `lane`.
+    pub fn set(&mut self, lane: usize, tri: [Vec3; 3]) {
+        for (corner, p) in tri.iter().enumerate() {
+            self.v[corner][0][lane] = p.x;
+            self.v[corner][1][lane] = p.y;
+            self.v[corner][2][lane] = p.z;
+        }
+    }
+}
+
+/// The lanes of `pack` that [`intersect`] could accept, as a bit mask (a
+/// superset: the lanes whose sheared edge functions do not already show
+/// the ray passing outside). The four edge tests run at once on SSE lanes
+/// with exactly the scalar test's operations, so a lane is dropped only
+/// where [`intersect`] would reject it; the survivors (the hits, and the
+/// rare exact zeros that the scalar test re-evaluates in `f64`) are then
+/// tested one by one, which keeps the results bit-identical.
+#[must_use]
+#[inline]
+pub fn candidates(pre: &RayPrecomp, pack: &TriPack) -> u32 {
+    let [kx, ky, kz] = pre.k;
+    let [sx, sy] = pre.s4;
+    let o = &pre.o4;
+    let shear = |c: &[Vec4; 3]| {
+        let x = c[kx] - o[kx];
+        let y = c[ky] - o[ky];
+        let z = c[kz] - o[kz];
+        (x - sx * z, y - sy * z)
+    };
+    let (ax, ay) = shear(&pack.v[0]);
+    let (bx, by) = shear(&pack.v[1]);
+    let (cx, cy) = shear(&pack.v[2]);
+    let u = cx * by - cy * bx;
+    let v = ax * cy - ay * cx;
+    let w = bx * ay - by * ax;
+    let zero = Vec4::ZERO;
+    let exact_zero = u.cmpeq(zero) | v.cmpeq(zero) | w.cmpeq(zero);
+    let neg = u.cmplt(zero) | v.cmplt(zero) | w.cmplt(zero);
+    let pos = u.cmpgt(zero) | v.cmpgt(zero) | w.cmpgt(zero);
+    let outside = (neg & pos & !exact_zero).bitmask();
+    !outside & ((1u32 << pack.lanes) - 1)
 }
 
 /// A hit: distance and the barycentric weights (of v0, v1, v2) as the

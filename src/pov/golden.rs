@@ -114,8 +114,10 @@ pub struct Reference {
     pub image_hashes: Vec<(String, u64)>,
 }
 
-/// `true` when some material of the scene reflects or transmits.
-fn has_ray_tree(tri: &TriScene) -> bool {
+/// `true` when some material of the scene reflects or transmits (and
+/// `max_depth` > 1): the scene then has a `NAME.d1.png` reference.
+#[must_use]
+pub fn has_ray_tree(tri: &TriScene) -> bool {
     tri.max_depth > 1
         && tri
             .objects

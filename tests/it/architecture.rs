@@ -73,6 +73,12 @@ const ALLOWED: &[(&str, &[&str])] = &[
         ],
     ),
     (
+        "bench",
+        &[
+            "facade", "accel", "color", "image_io", "options", "pov", "ray", "scene",
+        ],
+    ),
+    (
         "diff",
         &[
             "facade", "accel", "color", "compare", "frame", "image_io", "pov", "scene",

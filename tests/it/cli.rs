@@ -45,6 +45,9 @@ fn help_texts() {
         &["render", "--help"],
         &["diff", "--help"],
         &["plan", "--help"],
+        &["pov", "--help"],
+        &["golden", "--help"],
+        &["bench", "--help"],
     ] {
         let o = rendiff(args);
         assert!(o.status.success(), "{args:?}");
@@ -399,5 +402,92 @@ fn golden_check_reports_stale_and_changed_references() {
         stdout(&o).contains("renders it differently"),
         "{}",
         stdout(&o)
+    );
+}
+
+/// `rendiff bench` on a small image: the CSV has a row per setting with
+/// finite times and errors, the plots are SVG documents, and a bad sweep
+/// name is a usage error.
+#[test]
+fn bench_writes_the_results_and_the_plots() {
+    let dir = temp("bench");
+    let o = rendiff(&[
+        "bench",
+        "scenes/spheres.toml",
+        "scenes/glass.toml",
+        "--quick",
+        "--repeats",
+        "1",
+        "--size",
+        "64x48",
+        "--sweep",
+        "plan",
+        "--sweep",
+        "shadows",
+        "--sweep",
+        "max_depth",
+        "--threads",
+        "1",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let csv = std::fs::read_to_string(dir.join("results.csv")).unwrap();
+    let mut lines = csv.lines();
+    assert_eq!(lines.next(), Some(rendiff::bench::CSV_HEADER));
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    // spheres: plan 2×2, shadows 2 (raster); glass: plan 2×2, shadows 2,
+    // max_depth 2 (ray).
+    assert_eq!(rows.len(), 4 + 2 + 4 + 2 + 2, "{csv}");
+    for r in &rows {
+        assert_eq!(r.len(), 18, "{r:?}");
+        let median: f64 = r[10].parse().unwrap();
+        let mae: f64 = r[14].parse().unwrap();
+        assert!(
+            median > 0.0 && median.is_finite() && mae >= 0.0 && mae.is_finite(),
+            "{r:?}"
+        );
+        // At 64x48 the stored 320x240 POV-Ray references do not apply: the
+        // reference is a ray-traced render.
+        assert!(r[13].starts_with("ray"), "{r:?}");
+    }
+    // The ray tracer measured against its own render at the scene's
+    // settings has no error there.
+    assert!(
+        rows.iter()
+            .any(|r| r[1] == "ray" && r[2] == "plan" && r[14] == "0.00000"),
+        "{csv}"
+    );
+    for f in [
+        "time_vs_error_spheres.svg",
+        "time_vs_error_glass.svg",
+        "plan_savings.svg",
+    ] {
+        let svg = std::fs::read_to_string(dir.join(f)).unwrap();
+        assert!(
+            svg.starts_with("<svg") && svg.trim_end().ends_with("</svg>"),
+            "{f}"
+        );
+    }
+    assert!(
+        std::fs::read_to_string(dir.join("index.html"))
+            .unwrap()
+            .contains("plan_savings.svg")
+    );
+    assert!(stdout(&o).contains("plan saved"), "{}", stdout(&o));
+
+    let o = rendiff(&[
+        "bench",
+        "scenes/spheres.toml",
+        "--sweep",
+        "nope",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).contains("unknown sweep \"nope\""),
+        "{}",
+        stderr(&o)
     );
 }

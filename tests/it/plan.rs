@@ -305,10 +305,22 @@ fn flat_meshes_carry_no_normals_to_interpolate() {
 fn tiny_scenes_use_a_flat_loop() {
     let light =
         "[[lights]]\nkind = \"point\"\nposition = [3.0, 5.0, 4.0]\ncolor = [1.0, 1.0, 1.0]\n";
-    // Two separate quads: 4 triangles, below the flat-loop threshold.
+    // Four separate quads: 8 triangles, below the flat-loop threshold, far
+    // enough apart that the SAH splits them (two packs in one leaf cost
+    // more than a node over two one-pack leaves).
+    let quad = |x: f32, z: f32| {
+        format!(
+            "[[objects]]\nkind = \"polygon\"\nmaterial = \"grey\"\npoints = [[{x}, 0.0, {z}], [{}, 0.0, {z}], [{}, 1.0, {z}], [{x}, 1.0, {z}]]\n",
+            x + 0.5,
+            x + 0.5
+        )
+    };
     let body = format!(
-        "{light}[[objects]]\nkind = \"polygon\"\nmaterial = \"grey\"\npoints = [[-2.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [-1.0, 1.0, 0.0], [-2.0, 1.0, 0.0]]\n\
-         [[objects]]\nkind = \"polygon\"\nmaterial = \"grey\"\npoints = [[1.0, 0.0, -1.0], [2.0, 0.0, -1.0], [2.0, 1.0, -1.0], [1.0, 1.0, -1.0]]\n"
+        "{light}{}{}{}{}",
+        quad(-3.0, 0.0),
+        quad(-1.0, -1.0),
+        quad(1.0, -2.0),
+        quad(2.5, 0.5)
     );
     let planned = inline(&body, &Overrides::default());
     let unplanned = inline(&body, &no_plan());

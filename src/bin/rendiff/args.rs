@@ -36,6 +36,46 @@ pub enum Command {
     /// folder and reports whether the stored ones are still what POV-Ray
     /// produces (exit 1 when one is stale or differs).
     Golden(GoldenArgs),
+    /// Measure run time against error, sweeping the settings that trade one for the other.
+    ///
+    /// Writes results.csv, a time-against-error plot per scene (with the
+    /// Pareto front marked), plan_savings.svg and index.html into --out.
+    Bench(BenchArgs),
+}
+
+/// `rendiff bench`.
+#[derive(Debug, Args)]
+pub struct BenchArgs {
+    /// Scene files (default: every scenes/*.toml).
+    pub scenes: Vec<PathBuf>,
+    /// Output folder.
+    #[arg(long, default_value = "rendiff-bench", value_name = "DIR")]
+    pub out: PathBuf,
+    /// Timed runs per setting (the median is reported).
+    #[arg(long, default_value_t = 5, value_name = "N")]
+    pub repeats: usize,
+    /// Only these sweeps (repeatable): tessellation, samples, depth,
+    /// shadows, max_depth, plan, threads.
+    #[arg(long = "sweep", value_name = "NAME")]
+    pub sweeps: Vec<String>,
+    /// Fewer settings per sweep.
+    #[arg(long)]
+    pub quick: bool,
+    /// Image size, overriding the scenes' (e.g. 640x480).
+    #[arg(long, value_name = "WxH", value_parser = parse_size)]
+    pub size: Option<(u32, u32)>,
+    /// Thread counts of the threads sweep, e.g. 1,2,4 (default: 1, 2, 4, … all cores).
+    #[arg(long, value_name = "LIST", value_delimiter = ',')]
+    pub threads: Vec<usize>,
+    /// Folder of the stored POV-Ray references.
+    #[arg(long = "golden", default_value = "golden/pov", value_name = "DIR")]
+    pub golden_dir: PathBuf,
+    /// Measure scaling instead: time against triangle count (a sphere
+    /// tessellated from 10^3 to 4·10^6 triangles) and against resolution
+    /// (the first scene given, default scenes/bunny.toml, 160x120 …
+    /// 1920x1080); writes scaling.csv and scaling.svg.
+    #[arg(long)]
+    pub scaling: bool,
 }
 
 /// `rendiff pov`.

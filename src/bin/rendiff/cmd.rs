@@ -10,7 +10,9 @@ use rendiff::shade::{LightKind, Pigment};
 use rendiff::{Backend, Overrides, Prepared};
 
 use crate::Outcome;
-use crate::args::{Cli, Command, DiffArgs, GoldenArgs, PlanArgs, PovArgs, RenderArgs, RenderFlags};
+use crate::args::{
+    BenchArgs, Cli, Command, DiffArgs, GoldenArgs, PlanArgs, PovArgs, RenderArgs, RenderFlags,
+};
 
 /// Writes to standard output; a closed pipe (`rendiff pov x | head`) ends
 /// the program quietly with success, as grep and ripgrep do.
@@ -32,7 +34,152 @@ pub fn run(cli: Cli) -> Result<Outcome> {
         Command::Plan(a) => plan(&a),
         Command::Pov(a) => pov(&a),
         Command::Golden(a) => golden(&a),
+        Command::Bench(a) => bench(&a),
     }
+}
+
+fn bench_scaling(a: &BenchArgs) -> Result<Outcome> {
+    use rendiff::bench::{plot, scaling};
+    let mut opts = scaling::ScalingOptions {
+        repeats: a.repeats,
+        ..scaling::ScalingOptions::default()
+    };
+    if let Some(scene) = a.scenes.first() {
+        opts.scene.clone_from(scene);
+    }
+    if a.out.exists() && !a.out.is_dir() {
+        bail!("--out {}: exists and is not a folder", a.out.display());
+    }
+    // The resolution scene must load before the long work starts.
+    Prepared::load(&opts.scene, &Overrides::default())?;
+    std::fs::create_dir_all(&a.out)
+        .with_context(|| format!("could not create {}", a.out.display()))?;
+    let progress = progress_bar(opts.segments.len() + opts.sizes.len());
+    let rows = scaling::run(&opts, &|label| {
+        progress.set_message(label.to_string());
+        progress.inc(1);
+    })?;
+    progress.finish_and_clear();
+    scaling::write_csv(&rows, &a.out.join("scaling.csv"))?;
+    let svg = plot::scaling(&rows)?;
+    rendiff::image_io::write_atomic(&a.out.join("scaling.svg"), |f| {
+        std::io::Write::write_all(f, svg.as_bytes())
+    })?;
+    let mut text = String::new();
+    for r in &rows {
+        let _ = writeln!(
+            text,
+            "{:9} {:9} {:>9} triangles {:>8} px {:10.2} ms",
+            r.series, r.what, r.triangles, r.pixels, r.median_ms
+        );
+    }
+    for line in scaling::fits(&rows) {
+        let _ = writeln!(text, "{line}");
+    }
+    let _ = writeln!(text, "results in {}", a.out.display());
+    say(&text);
+    Ok(Outcome::Ok)
+}
+
+fn bench(a: &BenchArgs) -> Result<Outcome> {
+    use rendiff::bench::{self, Bench, BenchOptions, Sweep, plot};
+    if a.scaling {
+        return bench_scaling(a);
+    }
+    let mut opts = BenchOptions {
+        repeats: a.repeats,
+        size: a.size,
+        quick: a.quick,
+        golden_dir: a.golden_dir.clone(),
+        ..BenchOptions::default()
+    };
+    if !a.sweeps.is_empty() {
+        opts.sweeps = a
+            .sweeps
+            .iter()
+            .map(|s| s.parse::<Sweep>())
+            .collect::<Result<_, _>>()
+            .map_err(|e| anyhow::anyhow!("--sweep: {e}"))?;
+    }
+    if !a.threads.is_empty() {
+        opts.threads.clone_from(&a.threads);
+    }
+    if a.out.exists() && !a.out.is_dir() {
+        bail!("--out {}: exists and is not a folder", a.out.display());
+    }
+    let scenes = scene_list(&a.scenes)?;
+    // Every scene loads and every option is checked before any work.
+    let run = Bench::new(&scenes, opts)?;
+    std::fs::create_dir_all(&a.out)
+        .with_context(|| format!("could not create {}", a.out.display()))?;
+    let progress = progress_bar(run.len());
+    let rows = run.run(&|label| {
+        progress.set_message(label.to_string());
+        progress.inc(1);
+    })?;
+    progress.finish_and_clear();
+
+    bench::write_csv(&rows, &a.out.join("results.csv"))?;
+    let mut names: Vec<String> = rows.iter().map(|r| r.scene.clone()).collect();
+    names.dedup();
+    let mut html = String::from(
+        "<!doctype html><meta charset=\"utf-8\"><title>rendiff bench</title>\n<h1>rendiff bench</h1>\n<p><a href=\"results.csv\">results.csv</a></p>\n<img src=\"plan_savings.svg\" alt=\"plan savings\">\n",
+    );
+    for name in &names {
+        let svg = plot::time_vs_error(name, &rows)?;
+        let file = format!("time_vs_error_{name}.svg");
+        rendiff::image_io::write_atomic(&a.out.join(&file), |f| {
+            std::io::Write::write_all(f, svg.as_bytes())
+        })?;
+        let _ = writeln!(html, "<h2>{name}</h2>\n<img src=\"{file}\" alt=\"{name}\">");
+    }
+    let savings = bench::plan_savings(&rows);
+    let svg = plot::plan_savings(&savings)?;
+    rendiff::image_io::write_atomic(&a.out.join("plan_savings.svg"), |f| {
+        std::io::Write::write_all(f, svg.as_bytes())
+    })?;
+    rendiff::image_io::write_atomic(&a.out.join("index.html"), |f| {
+        std::io::Write::write_all(f, html.as_bytes())
+    })?;
+
+    // The summary: each scene's own settings, and what the plan saved.
+    let mut text = String::new();
+    for name in &names {
+        for backend in [Backend::Raster, Backend::Ray] {
+            let base = rows.iter().find(|r| {
+                r.scene == *name
+                    && r.backend == backend
+                    && r.sweep == Sweep::Plan
+                    && r.setting == "on"
+            });
+            if let Some(r) = base {
+                let _ = writeln!(
+                    text,
+                    "{name:16} {backend:6} {:9.2} ms  error {:.4}/255 ({:.3} % beyond 2/255) vs {}",
+                    r.median_ms, r.mae8, r.beyond2_pct, r.reference
+                );
+            }
+        }
+    }
+    for (scene, backend, on, off) in &savings {
+        let _ = writeln!(
+            text,
+            "{scene:16} {backend:6} plan saved {:5.1} % (fastest run {off:.2} ms -> {on:.2} ms)",
+            if *off > 0.0 {
+                (off - on) / off * 100.0
+            } else {
+                0.0
+            }
+        );
+    }
+    let _ = writeln!(
+        text,
+        "{} settings measured; results in {}",
+        rows.len(),
+        a.out.display()
+    );
+    say(&text);
+    Ok(Outcome::Ok)
 }
 
 fn pov(a: &PovArgs) -> Result<Outcome> {

@@ -1,0 +1,341 @@
+//! rendiff beside its peers.
+//!
+//! ```text
+//! rendiff-peers embree [SCENE.toml] [--subdivide K] [--repeats N]
+//! rendiff-peers povray [SCENE.toml ...] [--threads 1,2] [--repeats N]
+//! ```
+//!
+//! `embree`: the primary rays of a scene (default: the 940 k-triangle
+//! bunny of `benches/scenes/bunny_1m.toml`, split 4 times) traced by
+//! rendiff's BVH and by Embree 3's `rtcIntersect1` (the single-ray API),
+//! on one thread and on all; the BVH builds timed too; the hits compared.
+//!
+//! `povray`: each scene rendered by POV-Ray 3.7 from `rendiff pov`'s
+//! mesh export (the same triangles) and by both backends, at equal thread
+//! counts; POV-Ray's render phase is its "Trace Time" (start-up, parsing
+//! and bounding excluded); ours is the whole render (BVH build included).
+//! The ray tracer is timed against POV-Ray's render of the scene as
+//! written, the rasterizer against its `max_depth = 1` render (both
+//! local-shading); equal error is shown by the share of pixels within
+//! 2/255 of POV-Ray's stored reference.
+//!
+//! Run from the repository root: `make peers`.
+
+mod embree;
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use rayon::prelude::*;
+use rendiff::accel::{Accel, AccelOptions};
+use rendiff::color::to_srgb8;
+use rendiff::math::Ray;
+use rendiff::pov::golden::{self, Variant};
+use rendiff::{Backend, Overrides, Prepared};
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+fn pool(n: usize) -> Result<rayon::ThreadPool> {
+    Ok(rayon::ThreadPoolBuilder::new().num_threads(n).build()?)
+}
+
+fn all_threads() -> usize {
+    std::thread::available_parallelism().map_or(1, std::num::NonZero::get)
+}
+
+/// `--name value` from the arguments.
+fn flag(args: &[String], name: &str) -> Option<String> {
+    args.iter()
+        .position(|a| a == name)
+        .and_then(|i| args.get(i + 1).cloned())
+}
+
+fn positional(args: &[String]) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    let mut skip = false;
+    for a in args {
+        if skip {
+            skip = false;
+        } else if a.starts_with("--") {
+            skip = true;
+        } else {
+            out.push(PathBuf::from(a));
+        }
+    }
+    out
+}
+
+fn main() -> Result<()> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let Some(cmd) = args.first() else {
+        bail!(
+            "usage: rendiff-peers embree [SCENE] [--subdivide K] [--repeats N] | povray [SCENE...] [--threads 1,2] [--repeats N]"
+        );
+    };
+    let rest = &args[1..];
+    let repeats: usize = flag(rest, "--repeats").map_or(Ok(5), |s| s.parse())?;
+    match cmd.as_str() {
+        "embree" => {
+            let scene = positional(rest)
+                .first()
+                .cloned()
+                .unwrap_or_else(|| PathBuf::from("benches/scenes/bunny_1m.toml"));
+            let k: u32 = flag(rest, "--subdivide").map_or(Ok(4), |s| s.parse())?;
+            embree_cmp(&scene, k, repeats)
+        }
+        "povray" => {
+            let mut scenes = positional(rest);
+            if scenes.is_empty() {
+                scenes = std::fs::read_dir("scenes")
+                    .context("run from the repository root")?
+                    .filter_map(Result::ok)
+                    .map(|e| e.path())
+                    .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+                    .collect();
+                scenes.sort();
+            }
+            let threads: Vec<usize> = flag(rest, "--threads").map_or_else(
+                || Ok(vec![1, all_threads()]),
+                |s| s.split(',').map(str::parse).collect(),
+            )?;
+            povray_cmp(&scenes, &threads, repeats)
+        }
+        other => bail!("unknown command {other:?}: expected embree or povray"),
+    }
+}
+
+fn embree_cmp(scene: &Path, subdivide: u32, repeats: usize) -> Result<()> {
+    let job = Prepared::load(scene, &Overrides::default())?;
+    let tri = job.tri.subdivided(subdivide);
+    let cam = &tri.camera;
+    let rays: Vec<Ray> = (0..cam.sample_height())
+        .flat_map(|sy| (0..cam.sample_width()).map(move |sx| (sx, sy)))
+        .map(|(sx, sy)| cam.sample_ray(sx, sy))
+        .collect();
+    println!(
+        "{}: {} triangles, {}x{}, {} primary rays",
+        scene.display(),
+        tri.len(),
+        cam.width(),
+        cam.height(),
+        rays.len()
+    );
+    let positions: Vec<[f32; 3]> = tri.positions.iter().map(|p| p.to_array()).collect();
+    let all = all_threads();
+    for threads in [1, all] {
+        let p = pool(threads)?;
+        // Builds.
+        let ours_build = median(
+            (0..repeats)
+                .map(|_| {
+                    p.install(|| {
+                        let t = Instant::now();
+                        let a = Accel::new(&tri, AccelOptions::default());
+                        std::hint::black_box(&a);
+                        t.elapsed().as_secs_f64() * 1e3
+                    })
+                })
+                .collect(),
+        );
+        let config = format!("threads={threads}");
+        let embree_build = median(
+            (0..repeats)
+                .map(|_| {
+                    let t = Instant::now();
+                    let e = embree::EmbreeScene::new(&positions, &tri.tris, &config);
+                    std::hint::black_box(&e);
+                    t.elapsed().as_secs_f64() * 1e3
+                })
+                .collect(),
+        );
+        let accel = Accel::new(&tri, AccelOptions::default());
+        let emb = embree::EmbreeScene::new(&positions, &tri.tris, &config)?;
+        let time = |f: &(dyn Fn(&Ray) -> Option<(u32, f32)> + Sync)| -> f64 {
+            median(
+                (0..repeats)
+                    .map(|_| {
+                        p.install(|| {
+                            let t = Instant::now();
+                            let hits: usize = rays
+                                .par_chunks(4096)
+                                .map(|c| c.iter().filter(|r| f(r).is_some()).count())
+                                .sum();
+                            std::hint::black_box(hits);
+                            t.elapsed().as_secs_f64() * 1e3
+                        })
+                    })
+                    .collect(),
+            )
+        };
+        let ours = |r: &Ray| accel.intersect(r).map(|h| (h.prim, h.t));
+        let theirs =
+            |r: &Ray| emb.intersect(r.origin.to_array(), r.dir.to_array(), r.t_min, r.t_max);
+        let t_ours = time(&ours);
+        let t_emb = time(&theirs);
+        let mrays = |ms: f64| rays.len() as f64 / ms / 1e3;
+        println!(
+            "{threads} thread(s): build ours {ours_build:.1} ms, Embree {embree_build:.1} ms ({:.2}x); primary rays ours {t_ours:.1} ms = {:.2} Mrays/s, Embree {t_emb:.1} ms = {:.2} Mrays/s; Embree is {:.2}x ours",
+            ours_build / embree_build,
+            mrays(t_ours),
+            mrays(t_emb),
+            t_ours / t_emb
+        );
+        if threads == 1 {
+            let (mut same, mut both_miss, mut differ, mut close) = (0usize, 0usize, 0usize, 0usize);
+            for r in &rays {
+                match (ours(r), theirs(r)) {
+                    (None, None) => both_miss += 1,
+                    (Some(a), Some(b)) if a.0 == b.0 => same += 1,
+                    (Some(a), Some(b)) => {
+                        differ += 1;
+                        if (a.1 - b.1).abs() <= 1e-5 * a.1.max(b.1) {
+                            close += 1;
+                        }
+                    }
+                    _ => differ += 1,
+                }
+            }
+            println!(
+                "hits: {same} same triangle, {both_miss} both miss, {differ} differ ({close} of them at the same distance within 1e-5: shared edges and vertices)"
+            );
+        }
+    }
+    Ok(())
+}
+
+/// POV-Ray's trace time in milliseconds from its statistics.
+fn trace_ms(stderr: &str) -> Option<f64> {
+    let line = stderr
+        .lines()
+        .find(|l| l.trim_start().starts_with("Trace Time:"))?;
+    let open = line.rfind('(')?;
+    let secs: f64 = line[open + 1..].split_whitespace().next()?.parse().ok()?;
+    Some(secs * 1e3)
+}
+
+/// Renders a reference with POV-Ray `repeats` times; the median trace time.
+fn povray_time(
+    job: &Prepared,
+    r: &golden::Reference,
+    threads: usize,
+    repeats: usize,
+    work: &Path,
+) -> Result<f64> {
+    let pov = work.join(format!("{}{}.pov", job.scene.name(), r.variant.suffix()));
+    std::fs::write(&pov, &r.export.text)?;
+    for img in &r.export.images {
+        img.materialise(work)?;
+    }
+    let dir = job
+        .scene
+        .path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let (w, h) = r.export.render_size;
+    let mut times = Vec::new();
+    for _ in 0..repeats {
+        let out = std::process::Command::new("povray")
+            .current_dir(dir)
+            .arg(format!("+I{}", pov.display()))
+            .arg(format!("+O{}", work.join("out.png").display()))
+            .arg(format!("+W{w}"))
+            .arg(format!("+H{h}"))
+            .args(["-D", "-A", "+FN16", "File_Gamma=1.0", "+Q9"])
+            .arg(format!("+WT{threads}"))
+            .arg(format!("+L{}", work.display()))
+            .output()
+            .context("could not run povray (apt-get install povray)")?;
+        let text = String::from_utf8_lossy(&out.stderr);
+        times.push(
+            trace_ms(&text).with_context(|| {
+                format!("no Trace Time in POV-Ray's output for {}", pov.display())
+            })?,
+        );
+    }
+    Ok(median(times))
+}
+
+/// Share of pixels within 2/255 of the stored reference, in percent.
+fn within(job: &Prepared, frame: &rendiff::frame::Frame, variant: Variant) -> Option<f64> {
+    let path = golden::reference_path(Path::new("golden/pov"), &job.scene, variant);
+    let img = rendiff::image_io::read_png_linear(&path).ok()?;
+    let ok = frame
+        .color
+        .iter()
+        .zip(&img.pixels)
+        .filter(|(p, q)| {
+            [(p.r, q.r), (p.g, q.g), (p.b, q.b)]
+                .iter()
+                .all(|(x, y)| to_srgb8(*x).abs_diff(to_srgb8(*y)) <= 2)
+        })
+        .count();
+    Some(ok as f64 / frame.color.len() as f64 * 100.0)
+}
+
+fn povray_cmp(scenes: &[PathBuf], threads: &[usize], repeats: usize) -> Result<()> {
+    let work = std::env::temp_dir().join(format!("rendiff-peers-{}", std::process::id()));
+    std::fs::create_dir_all(&work)?;
+    println!("scene,threads,backend,pov_variant,pov_trace_ms,ours_ms,speedup,within_2_255_pct");
+    let mut ratios: Vec<(String, usize, f64)> = Vec::new();
+    for path in scenes {
+        let job = Prepared::load(path, &Overrides::default())?;
+        let refs = golden::references(&job.scene, &job.tri)?;
+        for &n in threads {
+            let p = pool(n)?;
+            let mut best: Option<f64> = None;
+            for backend in [Backend::Raster, Backend::Ray] {
+                let variant = if backend == Backend::Raster
+                    && refs.iter().any(|r| r.variant == Variant::Depth1)
+                {
+                    Variant::Depth1
+                } else {
+                    Variant::Main
+                };
+                let Some(r) = refs.iter().find(|r| r.variant == variant) else {
+                    continue;
+                };
+                let pov_ms = povray_time(&job, r, n, repeats.min(3), &work)?;
+                let frame = p.install(|| job.render_with_depth(backend, r.max_depth).frame);
+                let ours = median(
+                    (0..repeats)
+                        .map(|_| p.install(|| job.render_with_depth(backend, r.max_depth).time_ms))
+                        .collect(),
+                );
+                let pct = within(&job, &frame, variant)
+                    .map_or_else(|| "n/a".into(), |v| format!("{v:.3}"));
+                println!(
+                    "{},{n},{backend},pov{},{pov_ms:.1},{ours:.2},{:.2},{pct}",
+                    job.scene.name(),
+                    variant.suffix(),
+                    pov_ms / ours
+                );
+                best = Some(best.map_or(pov_ms / ours, |b: f64| b.max(pov_ms / ours)));
+            }
+            if let Some(b) = best {
+                ratios.push((job.scene.name(), n, b));
+            }
+        }
+    }
+    for &n in threads {
+        let r: Vec<f64> = ratios.iter().filter(|x| x.1 == n).map(|x| x.2).collect();
+        if !r.is_empty() {
+            let min = r.iter().copied().fold(f64::INFINITY, f64::min);
+            let geo = (r.iter().map(|x| x.ln()).sum::<f64>() / r.len() as f64).exp();
+            println!(
+                "# {n} thread(s): best backend per scene is {min:.2}x (worst scene) … geometric mean {geo:.2}x faster than POV-Ray's render phase"
+            );
+        }
+    }
+    let _ = std::fs::remove_dir_all(&work);
+    Ok(())
+}
