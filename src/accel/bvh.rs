@@ -213,13 +213,37 @@ fn build_binary(
         if extent.z > 0.0 { nbf / extent.z } else { 0.0 },
         0.0,
     );
-    let mut bin_bounds = [[Box4::EMPTY; BINS]; 3];
-    let mut bin_count = [[0u32; BINS]; 3];
-    for p in prims.iter() {
+    // Two sets of bins, for even and odd primitives, merged afterwards:
+    // neighbours often fall in the same bin, and one set would chain every
+    // update to the previous one through memory.
+    let mut bin_bounds = [[[Box4::EMPTY; BINS]; 3]; 2];
+    let mut bin_count = [[[0u32; BINS]; 3]; 2];
+    let mut pairs = prims.chunks_exact(2);
+    for pair in &mut pairs {
+        let (p, q) = (&pair[0], &pair[1]);
+        let bp = bins_of(p.centroid2(), cbounds.lo, scale, nb);
+        let bq = bins_of(q.centroid2(), cbounds.lo, scale, nb);
+        for axis in 0..3 {
+            bin_bounds[0][axis][bp[axis]].grow(p.lo, p.hi);
+            bin_count[0][axis][bp[axis]] += 1;
+            bin_bounds[1][axis][bq[axis]].grow(q.lo, q.hi);
+            bin_count[1][axis][bq[axis]] += 1;
+        }
+    }
+    for p in pairs.remainder() {
         let b = bins_of(p.centroid2(), cbounds.lo, scale, nb);
         for axis in 0..3 {
-            bin_bounds[axis][b[axis]].grow(p.lo, p.hi);
-            bin_count[axis][b[axis]] += 1;
+            bin_bounds[0][axis][b[axis]].grow(p.lo, p.hi);
+            bin_count[0][axis][b[axis]] += 1;
+        }
+    }
+    let [mut bin_bounds, odd_bounds] = bin_bounds;
+    let [mut bin_count, odd_count] = bin_count;
+    for axis in 0..3 {
+        for b in 0..nb {
+            let o = odd_bounds[axis][b];
+            bin_bounds[axis][b].grow(o.lo, o.hi);
+            bin_count[axis][b] += odd_count[axis][b];
         }
     }
     // Triangles are tested four at a time: a leaf costs its packs.
