@@ -16,7 +16,10 @@ pub const BACKGROUND: u32 = u32::MAX;
 ///
 /// `color.len() == width·height`; the sample buffers have
 /// `(width·samples)·(height·samples)` entries, row-major from the top of
-/// the sample grid; every colour is finite.
+/// the sample grid (with one sample per pixel the sample colours are the
+/// pixel colours: `sample_color` is empty and [`Frame::sample_colors`]
+/// returns `color`, which saves a frame-sized buffer and its copy); every
+/// colour is finite.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Frame {
     /// Width in pixels.
@@ -27,7 +30,8 @@ pub struct Frame {
     pub samples: u32,
     /// Pixel colours (the plain mean of their samples), linear.
     pub color: Vec<Rgb>,
-    /// Sample colours, linear.
+    /// Sample colours, linear (empty with one sample per pixel: read them
+    /// with [`Frame::sample_colors`]).
     pub sample_color: Vec<Rgb>,
     /// Depth per sample: t along the unit primary ray; +∞ for background.
     pub depth: Vec<f32>,
@@ -48,7 +52,11 @@ impl Frame {
             height,
             samples,
             color: vec![background; n],
-            sample_color: vec![background; ns],
+            sample_color: if samples == 1 {
+                Vec::new()
+            } else {
+                vec![background; ns]
+            },
             depth: vec![f32::INFINITY; ns],
             id: vec![BACKGROUND; ns],
             flags: vec![0; ns],
@@ -73,8 +81,42 @@ impl Frame {
         self.id.len()
     }
 
-    /// Recomputes the pixel colours as the mean of their samples.
+    /// The sample colours (the pixel colours with one sample per pixel).
+    #[must_use]
+    pub fn sample_colors(&self) -> &[Rgb] {
+        if self.samples == 1 {
+            &self.color
+        } else {
+            &self.sample_color
+        }
+    }
+
+    /// The sample colours, for writing.
+    pub fn sample_colors_mut(&mut self) -> &mut [Rgb] {
+        if self.samples == 1 {
+            &mut self.color
+        } else {
+            &mut self.sample_color
+        }
+    }
+
+    /// The sample colours and the other per-sample buffers at once, for a
+    /// renderer filling them in parallel: (colour, depth, id, flags).
+    pub fn sample_buffers_mut(&mut self) -> (&mut [Rgb], &mut [f32], &mut [u32], &mut [u32]) {
+        let color = if self.samples == 1 {
+            &mut self.color
+        } else {
+            &mut self.sample_color
+        };
+        (color, &mut self.depth, &mut self.id, &mut self.flags)
+    }
+
+    /// Recomputes the pixel colours as the mean of their samples (nothing
+    /// to do with one sample per pixel).
     pub fn resolve(&mut self) {
+        if self.samples == 1 {
+            return;
+        }
         let n = self.samples as usize;
         let sw = self.sample_width() as usize;
         #[expect(clippy::cast_precision_loss, reason = "n² ≤ 256")]

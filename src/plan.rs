@@ -15,9 +15,12 @@ use crate::tri_scene::{NO_INDEX, TriScene};
 /// BVH when `bvh = "auto"`. Measured with `cargo bench --bench render --
 /// flat_loop_vs_bvh` (a 256×256 frame of primary rays, build included;
 /// medians): 16 triangles 2.20 ms flat / 2.68 ms BVH, 32 triangles
-/// 3.74 / 3.83 ms, 64 triangles 7.25 / 5.12 ms. Up to 8 triangles the SAH
-/// itself makes one leaf, so both are the same loop there.
-pub const FLAT_LOOP_MAX_TRIANGLES: usize = 32;
+/// 3.74 / 3.83 ms, 64 triangles 7.25 / 5.12 ms. That layout is one cluster;
+/// scenes of separate objects favour the BVH sooner: `scenes/grazing.toml`
+/// (26 triangles: a floor and two small boxes) renders 8–10 % faster with
+/// one (`rendiff bench --sweep plan`, fastest runs). Up to 8 triangles the
+/// SAH itself makes one leaf, so both are the same loop there.
+pub const FLAT_LOOP_MAX_TRIANGLES: usize = 16;
 
 /// One decision of the plan.
 #[derive(Clone, Debug, PartialEq, Eq)]

@@ -13,8 +13,9 @@
 //!    refraction by the ray's list of refracting objects it is inside,
 //!    total internal reflection added unfiltered, nothing at the depth limit.
 //!
-//! Parallel over 16×16-sample tiles with rayon; every sample is computed
-//! independently, so the output is bit-identical for any thread count.
+//! Parallel over bands of 16 sample rows with rayon, each traced in
+//! 16×16-sample tiles; every sample is computed independently, so the
+//! output is bit-identical for any thread count.
 
 use rayon::prelude::*;
 
@@ -166,50 +167,45 @@ pub fn render_counted(accel: &Accel<'_>, opts: &RayOptions) -> (Frame, RayStats)
         eye_inside,
     };
     let (sw, sh) = (cam.sample_width(), cam.sample_height());
-    let tiles_x = sw.div_ceil(TILE);
-    let tiles_y = sh.div_ceil(TILE);
-    let tiles: Vec<(u32, u32)> = (0..tiles_y)
-        .flat_map(|ty| (0..tiles_x).map(move |tx| (tx, ty)))
-        .collect();
-    let results: Vec<(Vec<SampleOut>, RayStats)> = tiles
-        .par_iter()
-        .map(|&(tx, ty)| {
-            let mut out = Vec::with_capacity((TILE * TILE) as usize);
+    // Bands of TILE sample rows, each traced in TILE×TILE tiles (coherent
+    // rays), written straight into the frame's rows.
+    let mut frame = Frame::new(cam.width(), cam.height(), cam.samples(), scene.background);
+    let band = (TILE * sw) as usize;
+    let (colors, depths, ids, flags) = frame.sample_buffers_mut();
+    let stats = colors
+        .par_chunks_mut(band)
+        .zip(depths.par_chunks_mut(band))
+        .zip(ids.par_chunks_mut(band))
+        .zip(flags.par_chunks_mut(band))
+        .enumerate()
+        .map(|(b, (((color, depth), id), flag))| {
             let mut w = Worker {
                 vis: ShadowRays::new(accel),
                 secondary: 0,
             };
-            for sy in ty * TILE..((ty + 1) * TILE).min(sh) {
-                for sx in tx * TILE..((tx + 1) * TILE).min(sw) {
-                    out.push(tracer.sample(sx, sy, &mut w));
+            let y0 = u32::try_from(b).unwrap_or(0) * TILE;
+            let rows = (sh - y0).min(TILE);
+            let mut primary = 0u64;
+            for tx in (0..sw).step_by(TILE as usize) {
+                for dy in 0..rows {
+                    for sx in tx..(tx + TILE).min(sw) {
+                        let s = tracer.sample(sx, y0 + dy, &mut w);
+                        let i = (dy as usize) * (sw as usize) + sx as usize;
+                        color[i] = s.color;
+                        depth[i] = s.depth;
+                        id[i] = s.id;
+                        flag[i] = s.flags;
+                        primary += 1;
+                    }
                 }
             }
-            let stats = RayStats {
-                primary: out.len() as u64,
+            RayStats {
+                primary,
                 shadow: w.vis.cast(),
                 secondary: w.secondary,
-            };
-            (out, stats)
-        })
-        .collect();
-    let stats = results
-        .iter()
-        .fold(RayStats::default(), |acc, (_, s)| acc + *s);
-    let mut frame = Frame::new(cam.width(), cam.height(), cam.samples(), scene.background);
-    for (&(tx, ty), (res, _)) in tiles.iter().zip(&results) {
-        let mut k = 0;
-        for sy in ty * TILE..((ty + 1) * TILE).min(sh) {
-            for sx in tx * TILE..((tx + 1) * TILE).min(sw) {
-                let i = (sy as usize) * (sw as usize) + sx as usize;
-                let s = res[k];
-                k += 1;
-                frame.sample_color[i] = s.color;
-                frame.depth[i] = s.depth;
-                frame.id[i] = s.id;
-                frame.flags[i] = s.flags;
             }
-        }
-    }
+        })
+        .reduce(RayStats::default, |a, b| a + b);
     frame.resolve();
     (frame, stats)
 }

@@ -312,7 +312,7 @@ pub fn compare_frames(
                     if class != Class::Agree {
                         return (class, f32::NAN, false);
                     }
-                    let err = sample_error(a.sample_color[i], b.sample_color[i]);
+                    let err = sample_error(a.sample_colors()[i], b.sample_colors()[i]);
                     let (fa, fb) = (a.flags[i], b.flags[i]);
                     let mut tie = (fa | fb) & FLAG_DISCONTINUITY != 0;
                     let shadow_diff = (fa ^ fb) & !FLAG_DISCONTINUITY;
@@ -359,7 +359,10 @@ pub fn compare_frames(
     // RMSE over all channels of the agreeing, non-tie samples.
     for (i, (&c, &t)) in classes.iter().zip(&ties).enumerate() {
         if c == Class::Agree && !t {
-            let (p, q) = (a.sample_color[i].clamp01(), b.sample_color[i].clamp01());
+            let (p, q) = (
+                a.sample_colors()[i].clamp01(),
+                b.sample_colors()[i].clamp01(),
+            );
             for (x, y) in p.to_array().iter().zip(q.to_array()) {
                 sq += f64::from(x - y).powi(2);
             }

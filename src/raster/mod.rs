@@ -797,12 +797,12 @@ fn shade_pass(
     };
     let mut frame = Frame::new(cam.width(), cam.height(), cam.samples(), scene.background);
     let w = sw as usize;
-    let shadow_rays: u64 = frame
-        .sample_color
+    let (colors, depths, id_buf, flag_buf) = frame.sample_buffers_mut();
+    let shadow_rays: u64 = colors
         .par_chunks_mut(w)
-        .zip(frame.depth.par_chunks_mut(w))
-        .zip(frame.id.par_chunks_mut(w))
-        .zip(frame.flags.par_chunks_mut(w))
+        .zip(depths.par_chunks_mut(w))
+        .zip(id_buf.par_chunks_mut(w))
+        .zip(flag_buf.par_chunks_mut(w))
         .enumerate()
         .map(|(sy, (((color, depth), ids), flags))| {
             let rays = accel.as_ref().map(ShadowRays::new);

@@ -26,7 +26,7 @@ fn no_plan() -> Overrides {
 fn differing_samples(a: &Frame, b: &Frame) -> Vec<usize> {
     (0..a.id.len())
         .filter(|&i| {
-            a.sample_color[i] != b.sample_color[i]
+            a.sample_colors()[i] != b.sample_colors()[i]
                 || a.depth[i].to_bits() != b.depth[i].to_bits()
                 || a.id[i] != b.id[i]
                 || a.flags[i] != b.flags[i]

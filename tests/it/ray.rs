@@ -692,7 +692,7 @@ radius = 1.0
                     bg,
                     Some((p2, p2.normalize())),
                 );
-                let got = frame.sample_color[i];
+                let got = frame.sample_colors()[i];
                 let got = [f64::from(got.r), f64::from(got.g), f64::from(got.b)];
                 for k in 0..3 {
                     assert!(
@@ -807,7 +807,7 @@ radius = 1.0
             if cam.sample_ray(sx, sy).dir.dot(ng) > -0.5 {
                 continue;
             }
-            let (c, c0) = (f.sample_color[i], f0.sample_color[i]);
+            let (c, c0) = (f.sample_colors()[i], f0.sample_colors()[i]);
             let want = [0.125f32, 0.25, 0.375];
             for (got, w) in [c.r - c0.r, c.g - c0.g, c.b - c0.b].iter().zip(want) {
                 if (got - w).abs() > 4.0 * f32::EPSILON * 2.0 {
