@@ -45,7 +45,9 @@ impl Side {
             });
         }
         s.parse::<Backend>().map(Side::Backend).map_err(|_| {
-            format!("unknown side \"{s}\"; expected a backend (raster, ray), pov, or a PATH.png")
+            format!(
+                "unknown side \"{s}\"; expected a backend (raster, ray, painter), pov, or a PATH.png"
+            )
         })
     }
 
@@ -176,8 +178,9 @@ pub fn tolerances(job: &Prepared) -> Result<(Tolerances, ImageTolerances), Error
     Ok((t, it))
 }
 
-fn produce(job: &Prepared, side: &Side, max_depth: u32) -> Result<Output, Error> {
-    match side {
+/// Renders or reads one side; a painter also says how its order went.
+fn produce(job: &Prepared, side: &Side, max_depth: u32) -> Result<(Output, Option<String>), Error> {
+    let out = match side {
         Side::Pov { golden_dir, render } => {
             use crate::pov::golden::{self, Variant};
             let variant = if max_depth == 1 && job.tri.max_depth > 1 {
@@ -214,15 +217,29 @@ fn produce(job: &Prepared, side: &Side, max_depth: u32) -> Result<Output, Error>
                 }
                 image_io::read_png_linear(&path)?
             };
-            Ok(Output::Image {
+            Output::Image {
                 width: img.width,
                 height: img.height,
                 pixels: img.pixels,
-            })
+            }
         }
         Side::Backend(b) => {
             let r = job.render_with_depth(*b, max_depth);
-            Ok(Output::Frame(r.frame, r.time_ms))
+            let note = match r.work {
+                crate::Work::Painter { order: o, .. } => Some(format!(
+                    "painter ({} sort): {} triangles drawn; {} overlapping pairs ordered: {} by depth ranges, {} by planes, {} coplanar; {} undecided (interpenetrating or cyclic), {} cycles broken; its real mismatches are samples it ordered wrongly",
+                    job.settings.painter_sort,
+                    o.drawn,
+                    o.overlapping_pairs,
+                    o.by_depth_range,
+                    o.by_plane,
+                    o.coplanar,
+                    o.undecided,
+                    o.cycles_broken
+                )),
+                _ => None,
+            };
+            return Ok((Output::Frame(r.frame, r.time_ms), note));
         }
         Side::Image(p) => {
             let img = image_io::read_png_linear(p)?;
@@ -237,13 +254,14 @@ fn produce(job: &Prepared, side: &Side, max_depth: u32) -> Result<Output, Error>
                     cam.height()
                 )));
             }
-            Ok(Output::Image {
+            Output::Image {
                 width: img.width,
                 height: img.height,
                 pixels: img.pixels,
-            })
+            }
         }
-    }
+    };
+    Ok((out, None))
 }
 
 /// Renders (or reads) both sides and compares them.
@@ -275,8 +293,10 @@ pub fn diff(job: &Prepared, scene_label: &str, a: &Side, b: &Side) -> Result<Dif
         ));
         max_depth = 1;
     }
-    let out_a = produce(job, a, max_depth)?;
-    let out_b = produce(job, b, max_depth)?;
+    let (out_a, note_a) = produce(job, a, max_depth)?;
+    let (out_b, note_b) = produce(job, b, max_depth)?;
+    notes.extend(note_a);
+    notes.extend(note_b);
     let cam = &job.tri.camera;
     let (comparison, image_tol_used) = match (&out_a, &out_b) {
         (Output::Frame(fa, _), Output::Frame(fb, _)) => (

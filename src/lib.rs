@@ -33,6 +33,7 @@ pub mod coverage;
 pub mod diff;
 pub mod frame;
 pub mod image_io;
+pub mod lines;
 pub mod math;
 pub mod options;
 pub mod plan;
@@ -53,7 +54,7 @@ use std::time::Instant;
 
 use accel::{Accel, AccelOptions};
 use frame::Frame;
-use options::{BvhMode, DepthFormat, Geometry, ShadowMode};
+use options::{BvhMode, DepthFormat, Geometry, PainterSort, ShadowMode};
 use plan::Plan;
 use scene::{LoadError, Scene};
 use tessellate::TessOptions;
@@ -66,6 +67,16 @@ pub enum Backend {
     Raster,
     /// The ray caster/tracer.
     Ray,
+    /// List priority: the painter's algorithm on the rasterizer's sample grid.
+    Painter,
+}
+
+impl Backend {
+    /// `true` for backends that shade locally (no ray tree).
+    #[must_use]
+    pub fn shades_locally(self) -> bool {
+        matches!(self, Backend::Raster | Backend::Painter)
+    }
 }
 
 impl fmt::Display for Backend {
@@ -73,6 +84,7 @@ impl fmt::Display for Backend {
         f.pad(match self {
             Backend::Raster => "raster",
             Backend::Ray => "ray",
+            Backend::Painter => "painter",
         })
     }
 }
@@ -83,7 +95,10 @@ impl FromStr for Backend {
         match s {
             "raster" => Ok(Backend::Raster),
             "ray" => Ok(Backend::Ray),
-            _ => Err(format!("unknown backend \"{s}\"; expected raster or ray")),
+            "painter" => Ok(Backend::Painter),
+            _ => Err(format!(
+                "unknown backend \"{s}\"; expected raster, ray or painter"
+            )),
         }
     }
 }
@@ -105,6 +120,8 @@ pub struct Overrides {
     pub bvh: Option<BvhMode>,
     /// `--max-depth`.
     pub max_depth: Option<u32>,
+    /// `--sort` (painter).
+    pub painter_sort: Option<PainterSort>,
     /// `--no-plan`.
     pub no_plan: bool,
 }
@@ -122,6 +139,8 @@ pub struct Settings {
     pub bvh: BvhMode,
     /// `max_depth`.
     pub max_depth: u32,
+    /// The painter's order.
+    pub painter_sort: PainterSort,
     /// The plan is in effect.
     pub plan: bool,
 }
@@ -173,6 +192,13 @@ pub struct Rendered {
 pub enum Work {
     /// The rasterizer's counters.
     Raster(raster::RasterStats),
+    /// The painter's counters: the rasterizer's, and its ordering.
+    Painter {
+        /// Scan conversion and shading.
+        raster: raster::RasterStats,
+        /// The drawing order.
+        order: raster::painter::PainterStats,
+    },
     /// The ray tracer's counters and its acceleration structure.
     Ray {
         /// Rays cast.
@@ -232,6 +258,7 @@ impl Prepared {
             geometry: ov.geometry.unwrap_or(scene.ray.geometry),
             bvh: ov.bvh.unwrap_or(scene.ray.bvh),
             max_depth: ov.max_depth.unwrap_or(scene.render.max_depth),
+            painter_sort: ov.painter_sort.unwrap_or_default(),
             plan: !ov.no_plan,
         };
         let mut tri = tri;
@@ -278,6 +305,14 @@ impl Prepared {
             Backend::Raster => {
                 let (frame, stats) = raster::render(&self.tri, &self.raster_options());
                 (frame, Work::Raster(stats))
+            }
+            Backend::Painter => {
+                let (frame, raster, order) = raster::painter::render(
+                    &self.tri,
+                    &self.raster_options(),
+                    self.settings.painter_sort,
+                );
+                (frame, Work::Painter { raster, order })
             }
             Backend::Ray => {
                 let accel = Accel::new(

@@ -181,3 +181,36 @@ mod tests {
         assert!("f16".parse::<DepthFormat>().is_err());
     }
 }
+
+/// How the painter orders its triangles (`--sort`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum PainterSort {
+    /// By the view depth of the centroid, farthest first: the plain
+    /// list-priority sort, which misorders long triangles.
+    Centroid,
+    /// Newell, Newell and Sancha's tests on every pair whose projections
+    /// overlap (depth ranges, then each triangle's plane against the
+    /// other's vertices), then a topological sort, farthest first.
+    #[default]
+    Newell,
+}
+
+impl fmt::Display for PainterSort {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.pad(match self {
+            PainterSort::Centroid => "centroid",
+            PainterSort::Newell => "newell",
+        })
+    }
+}
+
+impl FromStr for PainterSort {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "centroid" => Ok(PainterSort::Centroid),
+            "newell" => Ok(PainterSort::Newell),
+            _ => Err(format!("expected \"centroid\" or \"newell\", got \"{s}\"")),
+        }
+    }
+}

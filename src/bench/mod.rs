@@ -434,7 +434,7 @@ impl Bench {
     ) -> Result<(String, Vec<Rgb>), Error> {
         let base = Prepared::from_scene(scene.clone(), &base_overrides(&self.opts))?;
         let has_d1 = golden::has_ray_tree(&base.tri);
-        let local = backend == Backend::Raster && has_d1;
+        let local = backend.shades_locally() && has_d1;
         let variant = match kind {
             RefKind::Main if local => Some(Variant::Depth1),
             RefKind::Main => Some(Variant::Main),
@@ -532,7 +532,7 @@ impl Runner {
         let err = image_error(&first.frame.color, reference);
         let rays = match first.work {
             Work::Ray { rays, .. } => rays.primary + rays.shadow + rays.secondary,
-            Work::Raster(s) => s.shadow_rays,
+            Work::Raster(s) | Work::Painter { raster: s, .. } => s.shadow_rays,
         };
         let cam = &self.job.tri.camera;
         Row {

@@ -19,7 +19,11 @@
 //!   primary sample is none of the above, so the difference arises along a
 //!   secondary ray (which meets edges, shadow boundaries and critical angles
 //!   at positions no sample grid controls). Counted apart: a comparison can
-//!   bound it.
+//!   bound it;
+//! * under a **Blinn bump**: its visible surface has a bump map with
+//!   `method = "blinn"`, which POV-Ray (whose `bump_map` is the other
+//!   method, DESIGN.md §3) does not compute; counted apart for the same
+//!   reason.
 //!
 //! Anything else is unexplained.
 
@@ -36,6 +40,9 @@ use crate::shade::FLAG_DISCONTINUITY;
 pub enum Explanation {
     /// Geometry nearer than the near plane.
     NearPlane,
+    /// A surface bump-mapped by Blinn's method, which POV-Ray does not
+    /// have (ranked before the causes below: no pixel of it can match).
+    BlinnBump,
     /// Coincident surfaces.
     DepthTie,
     /// A triangle edge or silhouette.
@@ -63,6 +70,8 @@ pub struct Explained {
     pub shadow_or_gate: u64,
     /// Secondary rays of reflecting or transmitting surfaces.
     pub ray_tree: u64,
+    /// Surfaces bump-mapped by Blinn's method.
+    pub blinn_bump: u64,
     /// The rest.
     pub unexplained: u64,
 }
@@ -104,6 +113,13 @@ pub fn explain_pixel(
                 if material.is_some_and(crate::shade::Material::spawns_rays) && scene.max_depth > 1
                 {
                     best = best.min(Explanation::RayTree);
+                }
+                if material.is_some_and(|m| {
+                    m.bump
+                        .as_ref()
+                        .is_some_and(|b| b.method == crate::shade::BumpMethod::Blinn)
+                }) {
+                    best = best.min(Explanation::BlinnBump);
                 }
                 // Coincident surfaces along the ray.
                 let f = oracle.footprint(id, px, py);
@@ -197,6 +213,7 @@ pub fn explain(
                 Explanation::Edge => counts.edge += 1,
                 Explanation::ShadowOrGate => counts.shadow_or_gate += 1,
                 Explanation::RayTree => counts.ray_tree += 1,
+                Explanation::BlinnBump => counts.blinn_bump += 1,
                 Explanation::Unexplained => counts.unexplained += 1,
             }
             list.push((x, y, e));

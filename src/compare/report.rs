@@ -163,13 +163,14 @@ impl Report {
         if let Some(e) = &self.explained {
             let _ = writeln!(
                 o,
-                "  beyond the 8-bit bound: {} pixel(s): {} at edges, {} depth ties, {} shadow boundaries or gates, {} before the near plane, {} in the ray tree, {} unexplained",
+                "  beyond the 8-bit bound: {} pixel(s): {} at edges, {} depth ties, {} shadow boundaries or gates, {} before the near plane, {} in the ray tree, {} under Blinn bumps, {} unexplained",
                 e.differing,
                 e.edge,
                 e.depth_tie,
                 e.shadow_or_gate,
                 e.near_plane,
                 e.ray_tree,
+                e.blinn_bump,
                 e.unexplained
             );
         }

@@ -25,6 +25,7 @@
 //! any number of threads.
 
 pub mod clip;
+pub mod painter;
 pub mod shadow_map;
 
 use rayon::prelude::*;
@@ -260,6 +261,26 @@ fn homogeneous(scene: &TriScene, perturb: Perturb) -> Vec<HVert> {
 /// The visibility pass alone: depth keys, ids and barycentrics per sample.
 #[must_use]
 pub fn visibility(scene: &TriScene, opts: &RasterOptions) -> VisibilityBuffers {
+    visibility_with(scene, opts, &Rule::ZBuffer)
+}
+
+/// How a sample chooses between the triangles that cover it.
+#[derive(Clone, Debug)]
+pub(crate) enum Rule<'a> {
+    /// The nearest (depth key, then triangle id): the z-buffer.
+    ZBuffer,
+    /// The last drawn: triangles are drawn in order of their rank
+    /// (`rank[tri]`, ascending), each overwriting what is there (list
+    /// priority, the painter's algorithm).
+    Painter(&'a [u32]),
+}
+
+/// The visibility pass under a rule.
+pub(crate) fn visibility_with(
+    scene: &TriScene,
+    opts: &RasterOptions,
+    rule: &Rule<'_>,
+) -> VisibilityBuffers {
     let cam = &scene.camera;
     let n = cam.samples();
     let grid = SampleGrid::new(n);
@@ -288,7 +309,11 @@ pub fn visibility(scene: &TriScene, opts: &RasterOptions) -> VisibilityBuffers {
             )
         })
         .collect();
-    let records: Vec<&Record> = chunks.iter().flat_map(|c| &c.0).collect();
+    let mut records: Vec<&Record> = chunks.iter().flat_map(|c| &c.0).collect();
+    if let Rule::Painter(rank) = rule {
+        // Drawing order; a triangle's sub-triangles stay together (stable).
+        records.sort_by_key(|r| rank.get(r.tri as usize).copied().unwrap_or(u32::MAX));
+    }
     let culled = chunks.iter().fold(Culled::default(), |a, (_, c)| Culled {
         frustum: a.frustum + c.frustum,
         backface: a.backface + c.backface,
@@ -336,6 +361,7 @@ pub fn visibility(scene: &TriScene, opts: &RasterOptions) -> VisibilityBuffers {
             let rows = row0..(row0 + BAND).min(sh);
             let mut writes = 0u64;
             let mut frags = 0u64;
+            let overwrite = matches!(rule, Rule::Painter(_));
             for r in &lists[counts[b]..counts[b + 1]] {
                 let (w, f) = scan_record(
                     scene,
@@ -346,9 +372,8 @@ pub fn visibility(scene: &TriScene, opts: &RasterOptions) -> VisibilityBuffers {
                     sw,
                     perspective,
                     &depth_map,
-                    key,
-                    id,
-                    bary,
+                    overwrite,
+                    (key, id, bary),
                 );
                 writes += w;
                 frags += f;
@@ -572,7 +597,9 @@ fn bary_of(l: &[f64; 3]) -> [f32; 3] {
     })
 }
 
-/// Scans one record over `rows` (a band); returns (depth writes, fragments).
+/// Scans one record over `rows` (a band): each covered sample takes the
+/// record's triangle if it passes the depth test (or always, with
+/// `overwrite`: the painter); returns (writes, fragments).
 #[expect(
     clippy::too_many_arguments,
     reason = "the band's buffers and the record"
@@ -586,9 +613,8 @@ fn scan_record(
     sw: u32,
     perspective: bool,
     depth_map: &DepthMap,
-    key: &mut [u32],
-    id: &mut [u32],
-    bary: &mut [[f32; 3]],
+    overwrite: bool,
+    (key, id, bary): (&mut [u32], &mut [u32], &mut [[f32; 3]]),
 ) -> (u64, u64) {
     let row0 = rows.start;
     let mut writes = 0u64;
@@ -605,7 +631,7 @@ fn scan_record(
             let i = ((row - row0) * sw + col) as usize;
             let k = depth_map.key(d);
             frags += 1;
-            if k < key[i] || (k == key[i] && r.tri < id[i]) {
+            if overwrite || k < key[i] || (k == key[i] && r.tri < id[i]) {
                 key[i] = k;
                 id[i] = r.tri;
                 bary[i] = bary_of(l);

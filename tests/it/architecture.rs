@@ -26,6 +26,7 @@ const ALLOWED: &[(&str, &[&str])] = &[
     ("tessellate", &["camera", "math", "scene", "tri_scene"]),
     ("accel", &["color", "math", "options", "shade", "tri_scene"]),
     ("plan", &["camera", "math", "options", "tri_scene"]),
+    ("lines", &["accel", "camera", "math", "tri_scene"]),
     (
         "raster",
         &[

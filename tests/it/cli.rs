@@ -48,6 +48,7 @@ fn help_texts() {
         &["pov", "--help"],
         &["golden", "--help"],
         &["bench", "--help"],
+        &["lines", "--help"],
     ] {
         let o = rendiff(args);
         assert!(o.status.success(), "{args:?}");
@@ -172,7 +173,7 @@ fn usage_errors_exit_with_2_and_say_what_was_expected() {
     let cases: &[(&[&str], &str)] = &[
         (
             &["render", "scenes/spheres.toml", "--backend", "gpu"],
-            "expected raster or ray",
+            "expected raster, ray or painter",
         ),
         (
             &["render", "scenes/spheres.toml", "--size", "0x10"],
@@ -490,4 +491,97 @@ fn bench_writes_the_results_and_the_plots() {
         "{}",
         stderr(&o)
     );
+}
+
+/// `rendiff lines` writes an SVG of line elements or a PNG; other
+/// extensions and bad crease angles are usage errors.
+#[test]
+fn lines_writes_svg_and_png() {
+    let dir = temp("lines");
+    let svg = dir.join("m.svg");
+    let o = rendiff(&[
+        "lines",
+        "scenes/menagerie.toml",
+        "-o",
+        svg.to_str().unwrap(),
+        "--hidden",
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let text = std::fs::read_to_string(&svg).unwrap();
+    assert!(text.starts_with("<svg") && text.contains("<line class=\"silhouette\""));
+    assert!(
+        text.contains("class=\"hidden\""),
+        "--hidden keeps the hidden pieces"
+    );
+    let png = dir.join("m.png");
+    let o = rendiff(&["lines", "scenes/spheres.toml", "-o", png.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let img = rendiff::image_io::read_png_linear(&png).unwrap();
+    assert_eq!((img.width, img.height), (320, 240));
+    assert!(img.pixels.iter().any(|p| p.r < 0.2), "no line drawn");
+    for (args, want) in [
+        (
+            vec!["lines", "scenes/spheres.toml", "-o", "x.jpg"],
+            ".svg or .png",
+        ),
+        (
+            vec![
+                "lines",
+                "scenes/spheres.toml",
+                "-o",
+                "x.svg",
+                "--crease",
+                "200",
+            ],
+            "--crease",
+        ),
+    ] {
+        let o = rendiff(&args);
+        assert_eq!(o.status.code(), Some(2), "{args:?}");
+        assert!(stderr(&o).contains(want), "{}", stderr(&o));
+    }
+    assert!(!root().join("x.svg").exists() && !root().join("x.jpg").exists());
+}
+
+/// The painter renders from the command line, sample-exact or smooth;
+/// `--smooth` belongs to the painter only.
+#[test]
+fn painter_renders_exact_and_smooth() {
+    let dir = temp("painter");
+    for (extra, name) in [(None, "exact.png"), (Some("--smooth"), "smooth.png")] {
+        let out = dir.join(name);
+        let mut args = vec![
+            "render",
+            "scenes/painter_cycle.toml",
+            "--backend",
+            "painter",
+            "--sort",
+            "centroid",
+            "-o",
+            out.to_str().unwrap(),
+        ];
+        args.extend(extra);
+        let o = rendiff(&args);
+        assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+        assert!(out.exists());
+    }
+    let o = rendiff(&[
+        "render",
+        "scenes/spheres.toml",
+        "--smooth",
+        "-o",
+        dir.join("x.png").to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("--smooth"), "{}", stderr(&o));
+    let o = rendiff(&[
+        "render",
+        "scenes/spheres.toml",
+        "--backend",
+        "painter",
+        "--sort",
+        "depth",
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("--sort"), "{}", stderr(&o));
 }

@@ -10,6 +10,10 @@ mod cli;
 mod differential;
 /// Regression images per backend (golden/raster, golden/ray).
 mod golden;
+/// Hidden lines: Appel's QI against ray counts and the z-buffer.
+mod lines;
+/// The painter's algorithm against the z-buffer.
+mod painter;
 /// The render plan: invariance with and without it, and each skip firing.
 mod plan;
 /// Both backends against the stored POV-Ray references.

@@ -143,14 +143,14 @@ max = [3.0, 0.0, 3.0]
 fn raster_work(p: &Prepared) -> rendiff::raster::RasterStats {
     match p.render(Backend::Raster).work {
         Work::Raster(s) => s,
-        Work::Ray { .. } => unreachable!("raster renders report raster work"),
+        other => panic!("a raster render reported {other:?}"),
     }
 }
 
 fn ray_work(p: &Prepared) -> (rendiff::ray::RayStats, rendiff::accel::BvhStats) {
     match p.render(Backend::Ray).work {
         Work::Ray { rays, bvh } => (rays, bvh),
-        Work::Raster(_) => unreachable!("ray renders report ray work"),
+        other => panic!("a ray render reported {other:?}"),
     }
 }
 

@@ -41,6 +41,31 @@ pub enum Command {
     /// Writes results.csv, a time-against-error plot per scene (with the
     /// Pareto front marked), plan_savings.svg and index.html into --out.
     Bench(BenchArgs),
+    /// Draw the visible edges (silhouettes, creases, boundaries) as SVG or PNG.
+    ///
+    /// Hidden parts are removed by Appel's quantitative invisibility: the
+    /// number of surfaces in front of an edge changes only where it passes
+    /// behind a contour edge.
+    Lines(LinesArgs),
+}
+
+/// `rendiff lines`.
+#[derive(Debug, Args)]
+pub struct LinesArgs {
+    /// The scene file (.toml).
+    pub scene: PathBuf,
+    /// Output .svg or .png.
+    #[arg(short = 'o', long = "output", value_name = "OUT.svg|OUT.png")]
+    pub output: PathBuf,
+    /// Edges whose faces meet at more than this angle (degrees) are drawn as creases.
+    #[arg(long, default_value_t = 30.0, value_name = "DEG")]
+    pub crease: f64,
+    /// Also draw the hidden parts (dashed, grey).
+    #[arg(long)]
+    pub hidden: bool,
+    /// Image size, overriding the scene's [image] (e.g. 640x480).
+    #[arg(long, value_name = "WxH", value_parser = parse_size)]
+    pub size: Option<(u32, u32)>,
 }
 
 /// `rendiff bench`.
@@ -116,7 +141,7 @@ pub struct DiffArgs {
     /// The scene files (.toml).
     #[arg(required = true)]
     pub scenes: Vec<PathBuf>,
-    /// Side a: a backend (raster, ray).
+    /// Side a: a backend (raster, ray, painter).
     #[arg(long = "a", default_value = "raster", value_name = "BACKEND")]
     pub a: String,
     /// Side b: a backend, pov (the POV-Ray reference), or PATH.png (any
@@ -171,6 +196,10 @@ pub struct RenderFlags {
     /// Ray tree depth (POV-Ray's max_trace_level), 1 … 64.
     #[arg(long, value_name = "N")]
     pub max_depth: Option<u32>,
+    /// The painter's order: newell (Newell's tests, the default) or
+    /// centroid (the plain depth sort).
+    #[arg(long, value_name = "ORDER")]
+    pub sort: Option<String>,
     /// Switch the render plan off: do all work, needed or not.
     #[arg(long)]
     pub no_plan: bool,
@@ -181,9 +210,13 @@ pub struct RenderFlags {
 pub struct RenderArgs {
     /// The scene file (.toml).
     pub scene: PathBuf,
-    /// The renderer: raster or ray.
+    /// The renderer: raster, ray or painter.
     #[arg(long, default_value = "ray")]
     pub backend: String,
+    /// With --backend painter: paint the triangles with anti-aliased fills
+    /// in one flat colour each (tiny-skia) instead of the sample grid.
+    #[arg(long)]
+    pub smooth: bool,
     /// Output PNG (default: NAME-BACKEND.png in the current folder).
     #[arg(short = 'o', long = "output", value_name = "OUT.png")]
     pub output: Option<PathBuf>,

@@ -11,7 +11,8 @@ use rendiff::{Backend, Overrides, Prepared};
 
 use crate::Outcome;
 use crate::args::{
-    BenchArgs, Cli, Command, DiffArgs, GoldenArgs, PlanArgs, PovArgs, RenderArgs, RenderFlags,
+    BenchArgs, Cli, Command, DiffArgs, GoldenArgs, LinesArgs, PlanArgs, PovArgs, RenderArgs,
+    RenderFlags,
 };
 
 /// Writes to standard output; a closed pipe (`rendiff pov x | head`) ends
@@ -35,7 +36,70 @@ pub fn run(cli: Cli) -> Result<Outcome> {
         Command::Pov(a) => pov(&a),
         Command::Golden(a) => golden(&a),
         Command::Bench(a) => bench(&a),
+        Command::Lines(a) => lines(&a),
     }
+}
+
+fn lines(a: &LinesArgs) -> Result<Outcome> {
+    use rendiff::lines::{LinesOptions, hidden_lines, to_rgba, to_svg};
+    let ext = a
+        .output
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    if !matches!(ext.as_deref(), Some("svg" | "png")) {
+        bail!(
+            "{}: expected an output ending in .svg or .png",
+            a.output.display()
+        );
+    }
+    if !(a.crease.is_finite() && (0.0..=180.0).contains(&a.crease)) {
+        bail!(
+            "--crease {}: expected an angle from 0 to 180 degrees",
+            a.crease
+        );
+    }
+    let job = Prepared::load(
+        &a.scene,
+        &Overrides {
+            size: a.size,
+            ..Overrides::default()
+        },
+    )?;
+    check_output_dir(&a.output)?;
+    let start = std::time::Instant::now();
+    let accel = rendiff::accel::Accel::new(&job.tri, rendiff::accel::AccelOptions::default());
+    let d = hidden_lines(
+        &job.tri,
+        &accel,
+        &LinesOptions {
+            crease_deg: a.crease,
+            hidden: a.hidden,
+            verify: false,
+        },
+    );
+    let ms = start.elapsed().as_secs_f64() * 1e3;
+    if ext.as_deref() == Some("svg") {
+        let svg = to_svg(&d);
+        rendiff::image_io::write_atomic(&a.output, |f| {
+            std::io::Write::write_all(f, svg.as_bytes())
+        })?;
+    } else {
+        rendiff::image_io::write_png_rgba8(&a.output, d.width, d.height, &to_rgba(&d))?;
+    }
+    let s = d.stats;
+    say(&format!(
+        "{}: {} edges, {} drawn ({} contours), {} QI changes; {} visible and {} hidden pieces in {ms:.1} ms -> {}\n",
+        a.scene.display(),
+        s.edges,
+        s.drawn_edges,
+        s.contours,
+        s.qi_changes,
+        s.visible,
+        s.hidden,
+        a.output.display()
+    ));
+    Ok(Outcome::Ok)
 }
 
 fn bench_scaling(a: &BenchArgs) -> Result<Outcome> {
@@ -467,6 +531,12 @@ pub fn overrides(flags: &RenderFlags) -> Result<Overrides> {
         .map(str::parse::<Geometry>)
         .transpose()
         .map_err(|e| anyhow::anyhow!("--geometry: {e}"))?;
+    let painter_sort = flags
+        .sort
+        .as_deref()
+        .map(str::parse::<rendiff::options::PainterSort>)
+        .transpose()
+        .map_err(|e| anyhow::anyhow!("--sort: {e}"))?;
     Ok(Overrides {
         size: flags.size,
         samples: flags.samples,
@@ -475,6 +545,7 @@ pub fn overrides(flags: &RenderFlags) -> Result<Overrides> {
         geometry,
         bvh: None,
         max_depth: flags.max_depth,
+        painter_sort,
         no_plan: flags.no_plan,
     })
 }
@@ -502,6 +573,29 @@ fn render(a: &RenderArgs) -> Result<Outcome> {
         .clone()
         .unwrap_or_else(|| PathBuf::from(format!("{}-{backend}.png", job.scene.name())));
     check_output_dir(&out)?;
+    if a.smooth {
+        if backend != Backend::Painter {
+            bail!(
+                "--smooth: only the painter paints with anti-aliased fills (use --backend painter)"
+            );
+        }
+        let start = std::time::Instant::now();
+        let rgba = rendiff::raster::painter::draw_smooth(
+            &job.tri,
+            &job.raster_options(),
+            job.settings.painter_sort,
+        );
+        let (w, h) = (job.tri.camera.width(), job.tri.camera.height());
+        rendiff::image_io::write_png_rgba8(&out, w, h, &rgba)?;
+        say(&format!(
+            "{}: painter ({} order), anti-aliased fills, {w}x{h} in {:.1} ms -> {}\n",
+            a.scene.display(),
+            job.settings.painter_sort,
+            start.elapsed().as_secs_f64() * 1e3,
+            out.display()
+        ));
+        return Ok(Outcome::Ok);
+    }
     let r = job.render(backend);
     r.frame.write_png(&out, encoding(&a.flags))?;
     if let Some(dir) = &a.flags.gbuffer {
