@@ -183,7 +183,10 @@ fn produce(job: &Prepared, side: &Side, max_depth: u32) -> Result<(Output, Optio
     let out = match side {
         Side::Pov { golden_dir, render } => {
             use crate::pov::golden::{self, Variant};
-            let variant = if max_depth == 1 && job.tri.max_depth > 1 {
+            let variant = if job.settings.geometry == crate::options::Geometry::Analytic {
+                // POV-Ray's own primitives (rendered at the scene's depth).
+                Variant::Analytic
+            } else if max_depth == 1 && job.tri.max_depth > 1 {
                 Variant::Depth1
             } else {
                 Variant::Main

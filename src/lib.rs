@@ -25,6 +25,7 @@
 #![warn(missing_docs, missing_debug_implementations)]
 
 pub mod accel;
+pub mod analytic;
 pub mod bench;
 pub mod camera;
 pub mod color;

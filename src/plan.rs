@@ -261,7 +261,7 @@ impl Plan {
         if scene.tri_uvs.iter().all(|t| t[0] == NO_INDEX) {
             scene.uvs = Vec::new();
         }
-        for s in &mut scene.spheres {
+        for s in &mut scene.analytic {
             if s.uv
                 && !self
                     .uv

@@ -256,7 +256,7 @@ impl Tracer<'_, '_> {
         } else {
             let k = hit.prim as usize - scene.len();
             let p64 = to_f64(ray.origin) + to_f64(ray.dir) * hit.t64;
-            (scene.sphere_surface_at(k, p64), p64)
+            (scene.analytic_surface_at(k, p64), p64)
         }
     }
 

@@ -20,10 +20,11 @@
 
 use std::collections::HashMap;
 
+use crate::analytic::{AnalyticKind, Placed};
 use crate::camera::{Camera, Projection};
 use crate::math::{Aabb, DMat3, DVec3, Vec2, Vec3, to_f32, to_f64};
 use crate::scene::{LoadError, MAX_COORDINATE, Object, ProjectionDesc, Scene, Shape};
-use crate::tri_scene::{AnalyticSphere, NO_INDEX, ObjectInfo, TriScene};
+use crate::tri_scene::{AnalyticShape, NO_INDEX, ObjectInfo, TriScene};
 
 /// Samples per triangle side when measuring a superellipsoid's chord error
 /// (28 points per triangle).
@@ -520,7 +521,7 @@ pub fn tessellate(scene: &Scene, opts: &TessOptions) -> Result<TriScene, LoadErr
         background: scene.image.background,
         ambient_light: scene.render.ambient_light,
         max_depth: scene.render.max_depth,
-        spheres: Vec::new(),
+        analytic: Vec::new(),
         bounds: Aabb::EMPTY,
         warnings: Vec::new(),
     };
@@ -762,17 +763,31 @@ fn append(
     }
     let last = u32::try_from(out.tris.len()).unwrap_or(u32::MAX);
     out.bounds = out.bounds.union(bounds);
-    if let Shape::Sphere { center, radius } = &obj.shape
-        && let Some(s) = tr.uniform_scale()
-    {
-        out.spheres.push(AnalyticSphere {
+    // The analytic version of curved shapes and boxes (`--geometry
+    // analytic`). Boxes and superellipsoids whose material reads uvs keep
+    // their triangles: their uv maps are those of the tessellation.
+    let needs_uv = scene.materials[usize::from(obj.material)].needs_uv();
+    let kind = match obj.shape {
+        Shape::Sphere { center, radius } => Some(AnalyticKind::Sphere { center, radius }),
+        Shape::Box { min, max } if !needs_uv => Some(AnalyticKind::Box { min, max }),
+        Shape::Superellipsoid { e, n } if !needs_uv => Some(AnalyticKind::Superellipsoid { e, n }),
+        _ => None,
+    };
+    if let Some(kind) = kind {
+        let placed = Placed::new(kind, tr.matrix(), tr.normal_matrix());
+        let world_sphere = match (kind, tr.uniform_scale()) {
+            (AnalyticKind::Sphere { center, radius }, Some(s)) => {
+                Some((tr.point(center), radius * s))
+            }
+            _ => None,
+        };
+        out.analytic.push(AnalyticShape {
             object: object_id,
-            center: tr.point(*center),
-            radius: radius * s,
-            world_to_object: tr.matrix().inverse(),
-            object_center: *center,
+            placed,
+            bounds: placed.world_bounds(),
+            world_sphere,
             material: obj.material,
-            uv: true,
+            uv: matches!(kind, AnalyticKind::Sphere { .. }),
         });
     }
     out.objects.push(ObjectInfo {

@@ -8,9 +8,10 @@
 
 use std::ops::Range;
 
+use crate::analytic::{AnalyticKind, Placed};
 use crate::camera::Camera;
 use crate::color::Rgb;
-use crate::math::{Aabb, Bary, DMat4, DVec3, Vec2, Vec3, to_f32, to_f64};
+use crate::math::{Aabb, Bary, DVec3, Vec2, Vec3, to_f32, to_f64};
 use crate::shade::{Light, Material, SurfacePoint, interpolation_error};
 
 /// "No normal" / "no uv" in a corner index triple.
@@ -40,23 +41,24 @@ pub struct ObjectInfo {
     pub segments: Option<u32>,
 }
 
-/// A sphere kept analytic for `--geometry analytic` (similarity transforms only).
+/// A shape kept analytic for `--geometry analytic`: a sphere, box or
+/// superellipsoid under its affine transform (the ray tracer intersects it
+/// in its own space, `crate::analytic`).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct AnalyticSphere {
+pub struct AnalyticShape {
     /// The object it stands for.
     pub object: u32,
-    /// World-space centre.
-    pub center: DVec3,
-    /// World-space radius.
-    pub radius: f64,
-    /// Maps world points back to the sphere's own frame (for the spherical uv map).
-    pub world_to_object: DMat4,
-    /// Centre as written (object space).
-    pub object_center: DVec3,
+    /// The shape and its transform.
+    pub placed: Placed,
+    /// World bounds (conservative).
+    pub bounds: (DVec3, DVec3),
+    /// A sphere under a similarity transform: its world centre and radius
+    /// (intersected in world space, without the transform's rounding).
+    pub world_sphere: Option<(DVec3, f64)>,
     /// Material.
     pub material: u16,
-    /// Compute the spherical uv map at hits (the plan turns it off where
-    /// the material reads no uvs).
+    /// Compute the spherical uv map at hits (spheres; the plan turns it off
+    /// where the material reads no uvs).
     pub uv: bool,
 }
 
@@ -93,8 +95,8 @@ pub struct TriScene {
     pub ambient_light: Rgb,
     /// `max_depth`.
     pub max_depth: u32,
-    /// Analytic spheres (used only with `--geometry analytic`).
-    pub spheres: Vec<AnalyticSphere>,
+    /// Analytic shapes (used only with `--geometry analytic`).
+    pub analytic: Vec<AnalyticShape>,
     /// Bounds of every triangle.
     pub bounds: Aabb,
     /// Messages for the user (e.g. a segment count capped).
@@ -137,7 +139,7 @@ impl TriScene {
             background: Rgb::BLACK,
             ambient_light: Rgb::WHITE,
             max_depth: 1,
-            spheres: Vec::new(),
+            analytic: Vec::new(),
             bounds,
             warnings: Vec::new(),
         }
@@ -359,24 +361,33 @@ impl TriScene {
         }
     }
 
-    /// Id of analytic sphere `k` (above every triangle id).
+    /// Id of analytic shape `k` (above every triangle id).
     #[must_use]
-    pub fn sphere_id(&self, k: usize) -> u32 {
+    pub fn analytic_id(&self, k: usize) -> u32 {
         u32::try_from(self.tris.len() + k).unwrap_or(u32::MAX)
     }
 
-    /// Shading inputs of analytic sphere `k` at world point `p`.
+    /// Shading inputs of analytic shape `k` at world point `p` on it.
     #[must_use]
-    pub fn sphere_surface_at(&self, k: usize, p: DVec3) -> SurfacePoint {
-        let s = &self.spheres[k];
-        let n = ((p - s.center) / s.radius).normalize_or_zero();
-        let uv = s.uv.then(|| {
-            sphere_uv((s.world_to_object.transform_point3(p) - s.object_center).normalize_or_zero())
-        });
+    pub fn analytic_surface_at(&self, k: usize, p: DVec3) -> SurfacePoint {
+        let s = &self.analytic[k];
+        let n = match s.world_sphere {
+            Some((center, radius)) => ((p - center) / radius).normalize_or_zero(),
+            None => s.placed.world_normal(p),
+        };
+        let uv = match s.placed.kind {
+            AnalyticKind::Sphere { center, .. } if s.uv => Some(sphere_uv(
+                (s.placed.to_object.transform_point3(p) - center).normalize_or_zero(),
+            )),
+            _ => None,
+        };
         let p32 = to_f32(p);
-        // The hit point comes from the stable quadratic: its error is a few
-        // ulps of the largest coordinate involved.
-        let scale = p.abs().max(s.center.abs()) + DVec3::splat(s.radius);
+        // The hit point comes from a root refined in f64 (the stable
+        // quadratic, slabs, or bisection to the last bits) and, under a
+        // transform, one affine map: its error is a few ulps of the largest
+        // coordinate involved, far below the f32 point's own rounding.
+        let (lo, hi) = s.bounds;
+        let scale = p.abs().max(lo.abs()).max(hi.abs());
         let p_error = to_f32(scale * 8.0 * f64::from(f32::EPSILON));
         let ns = to_f32(n);
         SurfacePoint {
@@ -389,18 +400,18 @@ impl TriScene {
             dpdv: Vec3::ZERO,
             material: s.material,
             object: s.object,
-            prim: self.sphere_id(k),
+            prim: self.analytic_id(k),
         }
     }
 
-    /// The object of a primitive id (triangle or analytic sphere).
+    /// The object of a primitive id (triangle or analytic shape).
     #[must_use]
     pub fn object_of(&self, prim: u32) -> Option<u32> {
         let i = prim as usize;
         if i < self.tris.len() {
             Some(self.tri_object[i])
         } else {
-            self.spheres.get(i - self.tris.len()).map(|s| s.object)
+            self.analytic.get(i - self.tris.len()).map(|s| s.object)
         }
     }
 

@@ -6,11 +6,11 @@
 //! [`ShadowRays`] (the hybrid of DESIGN.md §3), so both see the same shadows.
 
 pub mod bvh;
-pub mod sphere;
 pub mod triangle;
 
+use crate::analytic::sphere::sphere_roots;
 use crate::color::Rgb;
-use crate::math::{Ray, Vec3, to_f64};
+use crate::math::{DVec3, Ray, Vec3, to_f64};
 use crate::options::Geometry;
 use crate::shade::{ShadowQuery, Visibility};
 use crate::tri_scene::TriScene;
@@ -64,10 +64,10 @@ pub struct Hit {
 pub struct Accel<'s> {
     scene: &'s TriScene,
     bvh: Bvh,
-    /// Analytic spheres in use (indices into `scene.spheres`).
-    spheres: Vec<usize>,
+    /// Analytic shapes in use (indices into `scene.analytic`).
+    analytic: Vec<usize>,
     class: Vec<ShadowClass>,
-    sphere_class: Vec<ShadowClass>,
+    analytic_class: Vec<ShadowClass>,
     any_caster: bool,
 }
 
@@ -75,14 +75,14 @@ impl<'s> Accel<'s> {
     /// Builds the structure for a scene.
     #[must_use]
     pub fn new(scene: &'s TriScene, opts: AccelOptions) -> Accel<'s> {
-        let spheres: Vec<usize> = if opts.geometry == Geometry::Analytic {
-            (0..scene.spheres.len()).collect()
+        let analytic: Vec<usize> = if opts.geometry == Geometry::Analytic {
+            (0..scene.analytic.len()).collect()
         } else {
             Vec::new()
         };
         let mut analytic_object = vec![false; scene.objects.len()];
-        for &k in &spheres {
-            analytic_object[scene.spheres[k].object as usize] = true;
+        for &k in &analytic {
+            analytic_object[scene.analytic[k].object as usize] = true;
         }
         let ids: Vec<u32> = (0..u32::try_from(scene.len()).unwrap_or(u32::MAX))
             .filter(|&t| !analytic_object[scene.tri_object[t as usize] as usize])
@@ -100,21 +100,21 @@ impl<'s> Accel<'s> {
         let class: Vec<ShadowClass> = (0..scene.len())
             .map(|t| class_of(scene.tri_object[t], scene.tri_material[t]))
             .collect();
-        let sphere_class: Vec<ShadowClass> = scene
-            .spheres
+        let analytic_class: Vec<ShadowClass> = scene
+            .analytic
             .iter()
             .map(|s| class_of(s.object, s.material))
             .collect();
         let any_caster = class
             .iter()
-            .chain(&sphere_class)
+            .chain(&analytic_class)
             .any(|c| *c != ShadowClass::None);
         Accel {
             scene,
             bvh,
-            spheres,
+            analytic,
             class,
-            sphere_class,
+            analytic_class,
             any_caster,
         }
     }
@@ -140,15 +140,12 @@ impl<'s> Accel<'s> {
             b: h.b,
             t64: f64::from(h.t),
         });
-        if !self.spheres.is_empty() {
+        if !self.analytic.is_empty() {
             let (o, d) = (to_f64(ray.origin), to_f64(ray.dir));
-            for &k in &self.spheres {
-                let s = &self.scene.spheres[k];
+            for &k in &self.analytic {
                 let t_max = best.map_or(f64::from(ray.t_max), |h| h.t64);
-                if let Some(t) =
-                    sphere::intersect_sphere(o, d, s.center, s.radius, f64::from(ray.t_min), t_max)
-                {
-                    let prim = self.scene.sphere_id(k);
+                if let Some(t) = self.first_analytic(k, o, d, f64::from(ray.t_min), t_max) {
+                    let prim = self.scene.analytic_id(k);
                     #[expect(
                         clippy::cast_possible_truncation,
                         reason = "f32 copy of the f64 distance"
@@ -169,8 +166,69 @@ impl<'s> Accel<'s> {
         best
     }
 
+    /// Does the world ray `o + t·d` pass through the bounds of analytic
+    /// shape `k` within `[t_min, t_max]`?
+    fn analytic_bounds_hit(&self, k: usize, o: DVec3, d: DVec3, t_min: f64, t_max: f64) -> bool {
+        let (lo, hi) = self.scene.analytic[k].bounds;
+        let (mut a, mut b) = (t_min, t_max);
+        for axis in 0..3 {
+            if d[axis] == 0.0 {
+                if o[axis] < lo[axis] || o[axis] > hi[axis] {
+                    return false;
+                }
+                continue;
+            }
+            let inv = 1.0 / d[axis];
+            let (u, v) = ((lo[axis] - o[axis]) * inv, (hi[axis] - o[axis]) * inv);
+            a = a.max(u.min(v));
+            b = b.min(u.max(v));
+        }
+        a <= b
+    }
+
+    /// The nearest crossing of the world ray with analytic shape `k` in
+    /// `[t_min, t_max]`.
+    fn first_analytic(&self, k: usize, o: DVec3, d: DVec3, t_min: f64, t_max: f64) -> Option<f64> {
+        if !self.analytic_bounds_hit(k, o, d, t_min, t_max) {
+            return None;
+        }
+        let s = &self.scene.analytic[k];
+        match s.world_sphere {
+            Some((center, radius)) => {
+                let (t0, t1) = sphere_roots(o, d, center, radius)?;
+                [t0, t1].into_iter().find(|t| *t >= t_min && *t <= t_max)
+            }
+            None => {
+                let (lo, ld) = s.placed.to_local(o, d);
+                s.placed.kind.first(lo, ld, t_min, t_max)
+            }
+        }
+    }
+
+    /// Every crossing of the world ray with analytic shape `k` in
+    /// `(t_min, t_max)`.
+    fn analytic_crossings(&self, k: usize, o: DVec3, d: DVec3, t_max: f64, out: &mut Vec<f64>) {
+        out.clear();
+        if !self.analytic_bounds_hit(k, o, d, 0.0, t_max) {
+            return;
+        }
+        let s = &self.scene.analytic[k];
+        match s.world_sphere {
+            Some((center, radius)) => {
+                if let Some((t0, t1)) = sphere_roots(o, d, center, radius) {
+                    out.extend([t0, t1].into_iter().filter(|t| *t > 0.0 && *t < t_max));
+                }
+            }
+            None => {
+                let (lo, ld) = s.placed.to_local(o, d);
+                s.placed.kind.crossings(lo, ld, 0.0, t_max, out);
+                out.retain(|t| *t < t_max);
+            }
+        }
+    }
+
     /// Calls `visit(triangle, hit)` for every triangle hit in
-    /// `[ray.t_min, ray.t_max]` (analytic spheres excluded), in no particular
+    /// `[ray.t_min, ray.t_max]` (analytic shapes excluded), in no particular
     /// order; stops when `visit` returns `true`.
     pub fn for_each_triangle_hit(
         &self,
@@ -191,12 +249,13 @@ impl<'s> Accel<'s> {
     #[must_use]
     pub fn contains(&self, object: u32, p: Vec3) -> bool {
         if let Some(&k) = self
-            .spheres
+            .analytic
             .iter()
-            .find(|&&k| self.scene.spheres[k].object == object)
+            .find(|&&k| self.scene.analytic[k].object == object)
         {
-            let s = &self.scene.spheres[k];
-            return (to_f64(p) - s.center).length() < s.radius;
+            let s = &self.scene.analytic[k];
+            let local = s.placed.to_object.transform_point3(to_f64(p));
+            return s.placed.kind.contains(local);
         }
         let info = &self.scene.objects[object as usize];
         if !info.closed || !info.bounds.contains(p) {
@@ -280,24 +339,23 @@ impl Visibility for ShadowRays<'_, '_> {
             return Rgb::BLACK;
         }
         let (o, d) = (to_f64(origin), to_f64(dir));
-        for &k in &a.spheres {
-            let s = &a.scene.spheres[k];
-            let Some((t0, t1)) = sphere::sphere_roots(o, d, s.center, s.radius) else {
+        let mut ts = Vec::new();
+        for &k in &a.analytic {
+            if a.analytic_class[k] == ShadowClass::None {
                 continue;
-            };
-            for t in [t0, t1] {
-                if t > 0.0 && t < f64::from(t_max) {
-                    match a.sphere_class[k] {
-                        ShadowClass::Opaque => return Rgb::BLACK,
-                        ShadowClass::Transparent => {
-                            #[expect(
-                                clippy::cast_possible_truncation,
-                                reason = "f32 copy for ordering"
-                            )]
-                            crossings.push((t as f32, a.scene.sphere_id(k), [0.0; 3]));
-                        }
-                        ShadowClass::None => {}
+            }
+            a.analytic_crossings(k, o, d, f64::from(t_max), &mut ts);
+            for &t in &ts {
+                match a.analytic_class[k] {
+                    ShadowClass::Opaque => return Rgb::BLACK,
+                    ShadowClass::Transparent => {
+                        #[expect(
+                            clippy::cast_possible_truncation,
+                            reason = "f32 copy for ordering"
+                        )]
+                        crossings.push((t as f32, a.scene.analytic_id(k), [0.0; 3]));
                     }
+                    ShadowClass::None => {}
                 }
             }
         }
@@ -314,7 +372,7 @@ impl Visibility for ShadowRays<'_, '_> {
                 scene.surface_at(id, crate::math::Bary(b))
             } else {
                 let k = id as usize - scene.len();
-                scene.sphere_surface_at(k, to_f64(ray.at(t)))
+                scene.analytic_surface_at(k, to_f64(ray.at(t)))
             };
             let m = &scene.materials[usize::from(sp.material)];
             let (p, f, t) = m.pigment_at(sp.uv);

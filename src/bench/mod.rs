@@ -618,6 +618,14 @@ fn cases(scene: &Scene, base: &Prepared, opts: &BenchOptions) -> Vec<Case> {
                         );
                     }
                 }
+                // The ray tracer can skip tessellation altogether.
+                push(
+                    Backend::Ray,
+                    *sweep,
+                    "analytic".into(),
+                    &|c| c.ov.geometry = Some(Geometry::Analytic),
+                    RefKind::Surface,
+                );
             }
             Sweep::Samples => {
                 for n in pick(&[1.0, 2.0, 4.0], &[1.0, 2.0]) {

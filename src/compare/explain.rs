@@ -107,9 +107,16 @@ pub fn explain_pixel(
                 return Explanation::NearPlane;
             }
             if id != BACKGROUND {
-                let material = scene.materials.get(usize::from(
-                    scene.tri_material.get(id as usize).copied().unwrap_or(0),
-                ));
+                let is_triangle = (id as usize) < scene.len();
+                let material_id = if is_triangle {
+                    scene.tri_material.get(id as usize).copied()
+                } else {
+                    scene
+                        .analytic
+                        .get(id as usize - scene.len())
+                        .map(|s| s.material)
+                };
+                let material = material_id.and_then(|m| scene.materials.get(usize::from(m)));
                 if material.is_some_and(crate::shade::Material::spawns_rays) && scene.max_depth > 1
                 {
                     best = best.min(Explanation::RayTree);
@@ -121,10 +128,14 @@ pub fn explain_pixel(
                 }) {
                     best = best.min(Explanation::BlinnBump);
                 }
-                // Coincident surfaces along the ray.
-                let f = oracle.footprint(id, px, py);
-                if let Some(t) = f.t {
-                    let tol = oracle.depth_tolerance(&f) + f64::from(crate::math::gamma(16)) * t;
+                // Coincident surfaces along the ray, and triangle edges
+                // (an analytic shape has neither edges nor a footprint:
+                // only its outline, found from the neighbours below).
+                let f = is_triangle.then(|| oracle.footprint(id, px, py));
+                if let Some(f) = &f
+                    && let Some(t) = f.t
+                {
+                    let tol = oracle.depth_tolerance(f) + f64::from(crate::math::gamma(16)) * t;
                     let mut tie = false;
                     #[expect(clippy::cast_possible_truncation, reason = "a window for the f32 ray")]
                     let window = Ray {
@@ -140,7 +151,7 @@ pub fn explain_pixel(
                         best = best.min(Explanation::DepthTie);
                     }
                 }
-                if f.edge_dist <= oracle.edge_px {
+                if f.is_some_and(|f| f.edge_dist <= oracle.edge_px) {
                     best = best.min(Explanation::Edge);
                 }
             }

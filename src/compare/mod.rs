@@ -245,7 +245,7 @@ fn uv_spread(scene: &TriScene, m: usize) -> f64 {
         }
     }
     // Analytic spheres map the whole [0, 1] range.
-    if scene.spheres.iter().any(|s| usize::from(s.material) == m) {
+    if scene.analytic.iter().any(|s| usize::from(s.material) == m) {
         spread = spread.max(1.0);
     }
     spread

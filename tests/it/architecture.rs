@@ -12,6 +12,7 @@ const ALLOWED: &[(&str, &[&str])] = &[
     ("color", &[]),
     ("options", &[]),
     ("coverage", &[]),
+    ("analytic", &[]),
     ("texture", &["color", "math"]),
     ("image_io", &["color"]),
     ("camera", &["math"]),
@@ -22,9 +23,18 @@ const ALLOWED: &[(&str, &[&str])] = &[
         "scene",
         &["color", "math", "options", "polygon", "shade", "texture"],
     ),
-    ("tri_scene", &["camera", "color", "math", "shade"]),
-    ("tessellate", &["camera", "math", "scene", "tri_scene"]),
-    ("accel", &["color", "math", "options", "shade", "tri_scene"]),
+    (
+        "tri_scene",
+        &["analytic", "camera", "color", "math", "shade"],
+    ),
+    (
+        "tessellate",
+        &["analytic", "camera", "math", "scene", "tri_scene"],
+    ),
+    (
+        "accel",
+        &["analytic", "color", "math", "options", "shade", "tri_scene"],
+    ),
     ("plan", &["camera", "math", "options", "tri_scene"]),
     ("lines", &["accel", "camera", "math", "tri_scene"]),
     (
@@ -82,7 +92,7 @@ const ALLOWED: &[(&str, &[&str])] = &[
     (
         "diff",
         &[
-            "facade", "accel", "color", "compare", "frame", "image_io", "pov", "scene",
+            "facade", "accel", "color", "compare", "frame", "image_io", "options", "pov", "scene",
         ],
     ),
 ];

@@ -196,6 +196,21 @@ fn usage_errors_exit_with_2_and_say_what_was_expected() {
             "does not exist",
         ),
         (&["diff", "scenes/spheres.toml", "--b", "nope"], "--b"),
+        (
+            &[
+                "render",
+                "scenes/spheres.toml",
+                "--backend",
+                "raster",
+                "--geometry",
+                "analytic",
+            ],
+            "only the ray tracer",
+        ),
+        (
+            &["diff", "scenes/spheres.toml", "--geometry", "analytic"],
+            "--a is raster",
+        ),
         (&["render", "scenes/nosuch.toml"], "could not read"),
     ];
     let mut text = String::new();

@@ -676,7 +676,7 @@ radius = 1.0
                 }
                 let (o, d) = cam.primary_ray_f64(f64::from(sx) + 0.5, f64::from(sy) + 0.5);
                 let (t0, t1) =
-                    rendiff::accel::sphere::sphere_roots(o, d, DVec3::ZERO, 1.0).unwrap();
+                    rendiff::analytic::sphere::sphere_roots(o, d, DVec3::ZERO, 1.0).unwrap();
                 let p = o + d * t0;
                 // The renderer shades with the f32 direction; so does the reference.
                 let d32 = to_f64(to_f32(d));

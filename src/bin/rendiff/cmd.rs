@@ -426,6 +426,17 @@ fn diff(a: &DiffArgs) -> Result<Outcome> {
         other => other,
     };
     let ov = overrides(&a.flags)?;
+    if ov.geometry == Some(Geometry::Analytic) {
+        for (flag, side) in [("--a", &side_a), ("--b", &side_b)] {
+            if let Side::Backend(b) = side
+                && *b != Backend::Ray
+            {
+                bail!(
+                    "--geometry analytic: only the ray tracer renders analytic shapes ({flag} is {b})"
+                );
+            }
+        }
+    }
     if let Some(dir) = &a.out
         && dir.exists()
         && !dir.is_dir()
@@ -564,6 +575,11 @@ fn render(a: &RenderArgs) -> Result<Outcome> {
         .parse()
         .map_err(|e: String| anyhow::anyhow!("--backend: {e}"))?;
     let ov = overrides(&a.flags)?;
+    if ov.geometry == Some(Geometry::Analytic) && backend != Backend::Ray {
+        bail!(
+            "--geometry analytic: only the ray tracer renders analytic shapes (the {backend} draws triangles)"
+        );
+    }
     let job = Prepared::load(&a.scene, &ov)?;
     for w in &job.tri.warnings {
         eprintln!("warning: {w}");
