@@ -4,6 +4,8 @@
 mod architecture;
 /// Bad input: every file of tests/data/bad gives exit 2 and a located message.
 mod bad_input;
+/// Bump mapping: both methods against each other and against POV-Ray.
+mod bumps;
 /// The command line: help, outputs, exit codes, the HTML report.
 mod cli;
 /// Raster against ray on every scene, and the classifier's negative controls.
