@@ -123,6 +123,8 @@ pub struct Overrides {
     pub max_depth: Option<u32>,
     /// `--sort` (painter).
     pub painter_sort: Option<PainterSort>,
+    /// `--memory-budget`, in bytes.
+    pub memory_budget: Option<u64>,
     /// `--no-plan`.
     pub no_plan: bool,
 }
@@ -251,6 +253,7 @@ impl Prepared {
             &TessOptions {
                 size: ov.size,
                 samples: ov.samples,
+                memory_budget: ov.memory_budget,
             },
         )?;
         let settings = Settings {

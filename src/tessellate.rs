@@ -49,6 +49,59 @@ pub struct TessOptions {
     pub size: Option<(u32, u32)>,
     /// Final samples per pixel side.
     pub samples: Option<u32>,
+    /// Memory budget in bytes (`None`: [`DEFAULT_MEMORY_BUDGET`]).
+    pub memory_budget: Option<u64>,
+}
+
+/// Bytes a render holds per triangle, at most: the triangle scene (60 B
+/// measured on meshes), its BVH (58 B), and the rasterizer's transformed
+/// vertices and setup records or the BVH build's references (≈ 70 B);
+/// `tests/it/resources.rs` checks the measured parts against it.
+pub const BYTES_PER_TRIANGLE: u64 = 200;
+
+/// Bytes per sample: the frame's colour, depth, id and flags (24 B) and
+/// the rasterizer's depth key, id and barycentrics (20 B), rounded up.
+pub const BYTES_PER_SAMPLE: u64 = 48;
+
+/// Bytes per pixel beyond the samples: the resolved colour (12 B) and the
+/// PNG encoder's buffers (≤ 8 B), rounded up.
+pub const BYTES_PER_PIXEL: u64 = 24;
+
+/// The default memory budget of one render: 4 GiB.
+pub const DEFAULT_MEMORY_BUDGET: u64 = 4 << 30;
+
+/// The memory a scene will need, counted before anything large is
+/// allocated, against the budget.
+struct Budget {
+    limit: u64,
+    image: u64,
+    samples: u64,
+    triangles: u64,
+}
+
+impl Budget {
+    /// Adds `tris` triangles, or says why they do not fit.
+    fn add(&mut self, tris: u64, scene: &Scene, what: &str) -> Result<(), LoadError> {
+        self.triangles = self.triangles.saturating_add(tris);
+        let need = self
+            .triangles
+            .saturating_mul(BYTES_PER_TRIANGLE)
+            .saturating_add(self.image);
+        if need > self.limit {
+            let gib = |b: u64| b as f64 / f64::from(1u32 << 30);
+            return Err(LoadError::Scene {
+                path: scene.path.clone(),
+                message: format!(
+                    "{what} would need about {:.2} GiB ({} triangles at {BYTES_PER_TRIANGLE} B, {} samples at {BYTES_PER_SAMPLE} B), over the memory budget of {:.2} GiB: lower the tessellation, the image size or the samples, or raise --memory-budget",
+                    gib(need),
+                    self.triangles,
+                    self.samples,
+                    gib(self.limit)
+                ),
+            });
+        }
+        Ok(())
+    }
 }
 
 /// One object's geometry in object space before it joins the scene.
@@ -525,10 +578,26 @@ pub fn tessellate(scene: &Scene, opts: &TessOptions) -> Result<TriScene, LoadErr
         bounds: Aabb::EMPTY,
         warnings: Vec::new(),
     };
+    let (w, h, n) = (
+        u64::from(camera.width()),
+        u64::from(camera.height()),
+        u64::from(camera.samples()),
+    );
+    let samples = w * h * n * n;
+    let mut budget = Budget {
+        limit: opts.memory_budget.unwrap_or(DEFAULT_MEMORY_BUDGET),
+        image: samples
+            .saturating_mul(BYTES_PER_SAMPLE)
+            .saturating_add(w * h * BYTES_PER_PIXEL),
+        samples,
+        triangles: 0,
+    };
+    budget.add(0, scene, &format!("a {w}x{h} image with {n}x{n} samples"))?;
     for obj in &scene.objects {
-        let piece = object_piece(scene, obj, &camera, err_px, &mut out.warnings)?;
+        let piece = object_piece(scene, obj, &camera, err_px, &mut out.warnings, &mut budget)?;
         append(scene, obj, piece, &mut out)?;
     }
+    check_precision(scene, &out, &camera)?;
     // far: just beyond the farthest corner of the bounds (DESIGN.md §2).
     let far = match scene.camera.far {
         Some(f) => f,
@@ -549,13 +618,70 @@ pub fn tessellate(scene: &Scene, opts: &TessOptions) -> Result<TriScene, LoadErr
     Ok(out)
 }
 
+/// The smallest scene extent (the diagonal of its bounds) that the f32
+/// ray-triangle test resolves: its edge functions and distances are
+/// products of two and three coordinate differences, which must stay far
+/// above f32's smallest normal number (1.2e-38): (1e-10)³ = 1e-30.
+pub const MIN_EXTENT: f64 = 1e-10;
+
+/// The least number of f32 steps (at the largest coordinate of the scene
+/// or the eye) that the scene must span: below 2¹¹ the rounding of the
+/// stored positions moves vertices by more than 1/2048 of the scene.
+pub const MIN_EXTENT_STEPS: f64 = 2048.0;
+
+/// Rejects scenes whose geometry f32 arithmetic cannot represent
+/// (DESIGN.md §8): too small an extent for the products the ray-triangle
+/// test forms, or too small for its distance from the origin. (Too large
+/// coordinates are refused where they are read and after transforms:
+/// [`MAX_COORDINATE`].)
+fn check_precision(
+    scene: &Scene,
+    out: &TriScene,
+    camera: &crate::camera::Camera,
+) -> Result<(), LoadError> {
+    let b = out.bounds;
+    if b.is_empty() {
+        return Ok(());
+    }
+    let (lo, hi) = (to_f64(b.min), to_f64(b.max));
+    let extent = (hi - lo).length();
+    let largest = lo.abs().max(hi.abs()).max(camera.eye().abs()).max_element();
+    let step = largest * f64::from(f32::EPSILON);
+    let fail = |message: String| LoadError::Scene {
+        path: scene.path.clone(),
+        message,
+    };
+    if extent < MIN_EXTENT {
+        return Err(fail(format!(
+            "the scene spans {extent:.3e} units, below the {MIN_EXTENT:e} that f32 ray-triangle arithmetic resolves (its products of three coordinates would underflow); scale it up"
+        )));
+    }
+    if extent < MIN_EXTENT_STEPS * step {
+        return Err(fail(format!(
+            "the scene spans {extent:.3e} units at {largest:.3e} from the origin: only {:.0} f32 steps, fewer than the {MIN_EXTENT_STEPS} needed to keep its vertices in place; move it (and the camera) nearer the origin",
+            extent / step
+        )));
+    }
+    Ok(())
+}
+
 fn object_piece(
     scene: &Scene,
     obj: &Object,
     camera: &Camera,
     err_px: f64,
     warnings: &mut Vec<String>,
+    budget: &mut Budget,
 ) -> Result<Piece, LoadError> {
+    // A grid of n segments around and n/2 rings has n² triangles (less the
+    // poles): counted before it is built.
+    let grid = |n: u32, budget: &mut Budget| {
+        budget.add(
+            u64::from(n) * u64::from(n),
+            scene,
+            &format!("{} with {n} segments", obj.label()),
+        )
+    };
     let stretch = max_stretch(DMat3::from_mat4(obj.transform.matrix()));
     // World tolerance at the shape's nearest view depth, back in object space.
     let object_tolerance = |c_obj: DVec3, r_obj: f64| {
@@ -576,6 +702,7 @@ fn object_piece(
                     obj.label()
                 ));
             }
+            grid(n, budget)?;
             sphere_piece(*center, *radius, n)
         }
         Shape::Superellipsoid { e, n: ns } => {
@@ -589,11 +716,22 @@ fn object_piece(
                     obj.label()
                 ));
             }
+            grid(n, budget)?;
             superellipsoid_piece(*e, *ns, n)
         }
-        Shape::Box { min, max } => box_piece(*min, *max),
-        Shape::Polygon(poly) => polygon_piece(poly),
-        Shape::Mesh { data, smooth } => mesh_piece(data, *smooth),
+        Shape::Box { min, max } => {
+            budget.add(12, scene, &obj.label())?;
+            box_piece(*min, *max)
+        }
+        Shape::Polygon(poly) => {
+            let piece = polygon_piece(poly);
+            budget.add(piece.tris.len() as u64, scene, &obj.label())?;
+            piece
+        }
+        Shape::Mesh { data, smooth } => {
+            budget.add(data.triangles.len() as u64, scene, &obj.label())?;
+            mesh_piece(data, *smooth)
+        }
     })
 }
 

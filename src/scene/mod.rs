@@ -383,9 +383,12 @@ fn check_nonneg_rgb(t: &Table<'_, '_>, key: &'static str, v: &At<DVec3>) -> Resu
     Ok(())
 }
 
-/// Coordinates must stay far from f32 overflow: squares and cross products
-/// of them are formed in f32 by the renderers (DESIGN.md §8).
-pub const MAX_COORDINATE: f64 = 1e15;
+/// The largest coordinate a scene may use (positions after transforms, the
+/// eye, lights): the watertight ray-triangle test forms, in f32, distances
+/// as products of three coordinate differences (up to 2·MAX each, with
+/// factors of the shear ≤ √3 and three terms: about 336·MAX³), which must
+/// stay below f32::MAX = 3.4e38 (DESIGN.md §8).
+pub const MAX_COORDINATE: f64 = 1e12;
 
 fn check_coord(t: &Table<'_, '_>, key: &'static str, v: &At<DVec3>) -> Result<(), LoadError> {
     if v.value.abs().max_element() > MAX_COORDINATE {

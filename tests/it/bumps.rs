@@ -66,7 +66,11 @@ fn bump_methods_against_each_other_and_povray() {
     // Objects: 0 floor, 1 Blinn, 2 POV-Ray's method, 3 the strong one.
     let mut report = String::new();
     let mut rows = Vec::new();
-    for (object, what) in [(1, "blinn, size 0.5"), (2, "pov, size 0.5"), (3, "pov, size 5")] {
+    for (object, what) in [
+        (1, "blinn, size 0.5"),
+        (2, "pov, size 0.5"),
+        (3, "pov, size 5"),
+    ] {
         let (within, mean, max) = on_object(&job, &frame, &pov.pixels, object);
         report.push_str(&format!(
             "{what:16} vs POV-Ray: {:.2} % within 2/255, mean {mean:.2}/255, max {max}/255\n",

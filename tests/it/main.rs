@@ -1,5 +1,8 @@
 //! Integration tests (one binary). Each module says what it covers.
 
+/// Adversarial geometry: extreme scales, degenerate triangles, a million
+/// triangles in a pixel, eyes and lights inside objects.
+mod adversarial;
 /// The module map's one-way dependencies.
 mod architecture;
 /// Bad input: every file of tests/data/bad gives exit 2 and a located message.
@@ -24,6 +27,8 @@ mod povray;
 mod raster;
 /// The ray tracer: BVH, watertightness, self-hits, threads, shading.
 mod ray;
+/// Resource bounds: memory per triangle and per sample, the budget.
+mod resources;
 /// Tessellation: chord error bounds and closedness.
 mod tessellation;
 /// Helpers shared by the modules.

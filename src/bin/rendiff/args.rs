@@ -203,6 +203,10 @@ pub struct RenderFlags {
     /// Switch the render plan off: do all work, needed or not.
     #[arg(long)]
     pub no_plan: bool,
+    /// Refuse scenes that would need more memory than this many GiB
+    /// (default 4), before allocating it.
+    #[arg(long, value_name = "GIB")]
+    pub memory_budget: Option<f64>,
 }
 
 /// `rendiff render`.

@@ -548,6 +548,19 @@ pub fn overrides(flags: &RenderFlags) -> Result<Overrides> {
         .map(str::parse::<rendiff::options::PainterSort>)
         .transpose()
         .map_err(|e| anyhow::anyhow!("--sort: {e}"))?;
+    let memory_budget = match flags.memory_budget {
+        None => None,
+        Some(g) if g.is_finite() && g > 0.0 && g <= 1e6 => {
+            #[expect(
+                clippy::cast_possible_truncation,
+                clippy::cast_sign_loss,
+                reason = "a positive number of GiB, at most 1e6"
+            )]
+            let bytes = (g * f64::from(1u32 << 30)) as u64;
+            Some(bytes)
+        }
+        Some(g) => bail!("--memory-budget {g}: expected a positive number of GiB"),
+    };
     Ok(Overrides {
         size: flags.size,
         samples: flags.samples,
@@ -557,6 +570,7 @@ pub fn overrides(flags: &RenderFlags) -> Result<Overrides> {
         bvh: None,
         max_depth: flags.max_depth,
         painter_sort,
+        memory_budget,
         no_plan: flags.no_plan,
     })
 }
