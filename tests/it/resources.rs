@@ -86,7 +86,22 @@ fn scenes_over_the_budget_are_refused_before_allocating() {
     .expect_err("3 GiB of triangles over a 1 GiB budget");
     let m = err.to_string();
     assert!(m.contains(&label) && m.contains("4096 segments"), "{m}");
-    // Within the default budget the same request is accepted by the check
-    // (the count, not the tessellation, is what is tested here).
-    assert!(16_777_216 * BYTES_PER_TRIANGLE < DEFAULT_MEMORY_BUDGET);
+    // A request that fits is accepted: 256 segments (65 k triangles,
+    // 12.5 MiB by the count) plus the image under a 64 MiB budget.
+    let sphere = scene
+        .objects
+        .iter_mut()
+        .find(|o| o.shape.kind() == "sphere")
+        .unwrap();
+    sphere.tessellation = Some(256);
+    let job = Prepared::from_scene(
+        scene,
+        &Overrides {
+            memory_budget: Some(64 << 20),
+            ..Overrides::default()
+        },
+    )
+    .expect("fits the budget");
+    assert!(job.tri.len() > 65_000);
+    assert!((job.tri.len() as u64) * BYTES_PER_TRIANGLE < DEFAULT_MEMORY_BUDGET);
 }
