@@ -61,6 +61,7 @@ where
         w.flush()?;
         w.get_ref().sync_all()?;
         drop(w);
+        pause_before_rename();
         std::fs::rename(&tmp, path)
     })();
     if let Err(e) = result {
@@ -68,6 +69,22 @@ where
         return Err(io(e));
     }
     Ok(())
+}
+
+/// The test hook of the kill test (`tests/it/atomic.rs`): with
+/// `RENDIFF_TEST_PAUSE_BEFORE_RENAME_MS` set, every atomic write waits that
+/// long between finishing its temporary file and renaming it, so a SIGKILL
+/// can be landed there deterministically.
+fn pause_before_rename() {
+    static PAUSE: std::sync::OnceLock<Option<u64>> = std::sync::OnceLock::new();
+    let pause = PAUSE.get_or_init(|| {
+        std::env::var("RENDIFF_TEST_PAUSE_BEFORE_RENAME_MS")
+            .ok()
+            .and_then(|v| v.parse().ok())
+    });
+    if let Some(ms) = pause {
+        std::thread::sleep(std::time::Duration::from_millis(*ms));
+    }
 }
 
 /// How a colour image is encoded.

@@ -448,8 +448,9 @@ pub fn render_all(
 }
 
 /// Writes rendered references and their metadata: every file is first
-/// written in full to a temporary name in the golden folder, then all are
-/// renamed into place, so a failure leaves the old set intact.
+/// written in full to a temporary name in the golden folder, then the set
+/// is swapped in by renames that are undone if one fails, so a failure at
+/// any point leaves the old set intact.
 ///
 /// # Errors
 ///
@@ -491,11 +492,56 @@ pub fn store(
         }
         return Err(e);
     }
-    for (tmp, path) in staged {
-        std::fs::rename(&tmp, &path)
-            .map_err(|source| image_io::ImageIoError::Io { path, source })?;
+    commit(&staged)
+}
+
+/// Moves staged files into place as one set: every old file is first set
+/// aside (renamed to `*.previous`), then the new ones are renamed in; if
+/// any rename fails, what was moved is moved back, so the folder holds
+/// either the whole old set or the whole new one.
+fn commit(staged: &[(PathBuf, PathBuf)]) -> Result<(), GoldenError> {
+    let aside = |p: &Path| {
+        p.with_extension(format!(
+            "{}.previous",
+            p.extension().and_then(|e| e.to_str()).unwrap_or("")
+        ))
+    };
+    let mut moved_aside: Vec<(PathBuf, PathBuf)> = Vec::new();
+    let mut placed: Vec<PathBuf> = Vec::new();
+    let mut step = || -> Result<(), (PathBuf, std::io::Error)> {
+        for (_, path) in staged {
+            if path.exists() {
+                let a = aside(path);
+                std::fs::rename(path, &a).map_err(|e| (path.clone(), e))?;
+                moved_aside.push((a, path.clone()));
+            }
+        }
+        for (tmp, path) in staged {
+            std::fs::rename(tmp, path).map_err(|e| (path.clone(), e))?;
+            placed.push(path.clone());
+        }
+        Ok(())
+    };
+    match step() {
+        Ok(()) => {
+            for (a, _) in &moved_aside {
+                let _ = std::fs::remove_file(a);
+            }
+            Ok(())
+        }
+        Err((path, source)) => {
+            for p in &placed {
+                let _ = std::fs::remove_file(p);
+            }
+            for (a, p) in &moved_aside {
+                let _ = std::fs::rename(a, p);
+            }
+            for (tmp, _) in staged {
+                let _ = std::fs::remove_file(tmp);
+            }
+            Err(image_io::ImageIoError::Io { path, source }.into())
+        }
     }
-    Ok(())
 }
 
 /// The largest difference, in 16-bit codes, between two images of one size.

@@ -284,3 +284,48 @@ fn render_writes_nothing_for_bad_scenes() {
         assert!(left.is_empty(), "{rel}: render left files: {left:?}");
     }
 }
+
+/// Every subcommand that reads a scene stops at the same error on every
+/// corpus file, before writing anything: exit status 2, the message
+/// `plan` gives (naming the file and the place), no panic, no backtrace,
+/// no file left in the output folder.
+#[test]
+fn every_subcommand_reports_every_bad_scene() {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("bad_input_all");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let out = |name: &str| dir.join(name).to_string_lossy().into_owned();
+    let (png, pov, svg, bench, golden, diff) = (
+        out("x.png"),
+        out("x.pov"),
+        out("x.svg"),
+        out("bench"),
+        out("golden"),
+        out("diff"),
+    );
+    for rel in corpus() {
+        let plan = rendiff(&["plan", &rel]);
+        let runs: [(&str, Vec<&str>); 6] = [
+            ("render", vec!["render", &rel, "-o", &png]),
+            ("diff", vec!["diff", &rel, "--out", &diff]),
+            ("pov", vec!["pov", &rel, "-o", &pov]),
+            (
+                "golden",
+                vec!["golden", &rel, "--update", "--golden", &golden],
+            ),
+            ("bench", vec!["bench", &rel, "--quick", "--out", &bench]),
+            ("lines", vec!["lines", &rel, "-o", &svg]),
+        ];
+        for (cmd, args) in runs {
+            let o = rendiff(&args);
+            eprintln!("{rel}: {cmd}");
+            check_message(&rel, &o);
+            assert_eq!(
+                o.stderr, plan.stderr,
+                "{rel}: {cmd} and plan report differently"
+            );
+            let left: Vec<_> = std::fs::read_dir(&dir).unwrap().collect();
+            assert!(left.is_empty(), "{rel}: {cmd} left files: {left:?}");
+        }
+    }
+}

@@ -5,6 +5,8 @@
 mod adversarial;
 /// The module map's one-way dependencies.
 mod architecture;
+/// Nothing half-written: killed writes, failed golden updates.
+mod atomic;
 /// Bad input: every file of tests/data/bad gives exit 2 and a located message.
 mod bad_input;
 /// Bump mapping: both methods against each other and against POV-Ray.

@@ -303,13 +303,14 @@ fn scene_list(given: &[PathBuf]) -> Result<Vec<PathBuf>> {
 
 fn golden(a: &GoldenArgs) -> Result<Outcome> {
     use rendiff::pov::golden;
-    let version = golden::povray_version()?;
     let scenes = scene_list(&a.scenes)?;
-    // Load every scene first: bad input fails before any rendering.
+    // Load every scene first: bad input fails (naming its file) before
+    // POV-Ray is looked for or anything renders.
     let jobs: Vec<Prepared> = scenes
         .iter()
         .map(|p| Prepared::load(p, &Overrides::default()))
         .collect::<Result<_, _>>()?;
+    let version = golden::povray_version()?;
     let work = std::env::temp_dir().join(format!("rendiff-golden-{}", std::process::id()));
     std::fs::create_dir_all(&work)
         .with_context(|| format!("could not create {}", work.display()))?;
