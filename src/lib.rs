@@ -33,6 +33,7 @@ pub mod compare;
 pub mod coverage;
 pub mod diff;
 pub mod frame;
+pub mod fuzz;
 pub mod image_io;
 pub mod lines;
 pub mod math;

@@ -135,13 +135,7 @@ pub fn render(accel: &Accel<'_>, opts: &RayOptions) -> Frame {
 pub fn render_counted(accel: &Accel<'_>, opts: &RayOptions) -> (Frame, RayStats) {
     let scene = accel.scene();
     let cam = &scene.camera;
-    let ctx = ShadeContext {
-        materials: &scene.materials,
-        lights: &scene.lights,
-        ambient_light: scene.ambient_light,
-        gate_eps: opts.gate_eps,
-        shadows: opts.shadows,
-    };
+    let ctx = scene.shade_context(opts.gate_eps, opts.shadows);
     let eye = cam.eye_f32();
     // Which refracting objects contain the eye: only needed by the ray tree.
     let spawns = opts.max_depth > 1;

@@ -12,7 +12,7 @@ use crate::analytic::{AnalyticKind, Placed};
 use crate::camera::Camera;
 use crate::color::Rgb;
 use crate::math::{Aabb, Bary, DVec3, Vec2, Vec3, to_f32, to_f64};
-use crate::shade::{Light, Material, SurfacePoint, interpolation_error};
+use crate::shade::{Light, Material, ShadeContext, SurfacePoint, interpolation_error};
 
 /// "No normal" / "no uv" in a corner index triple.
 pub const NO_INDEX: u32 = u32::MAX;
@@ -104,6 +104,19 @@ pub struct TriScene {
 }
 
 impl TriScene {
+    /// The shading context of this scene's materials and lights, with the
+    /// gate half-width `gate_eps` and shadow rays on or off.
+    #[must_use]
+    pub fn shade_context(&self, gate_eps: f32, shadows: bool) -> ShadeContext<'_> {
+        ShadeContext {
+            materials: &self.materials,
+            lights: &self.lights,
+            ambient_light: self.ambient_light,
+            gate_eps,
+            shadows,
+        }
+    }
+
     /// A scene of flat triangles with one default material, no lights and
     /// a black background, as one object (closed if the triangles are): for
     /// tests, benchmarks and experiments that build geometry directly.

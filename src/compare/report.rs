@@ -278,14 +278,15 @@ pub fn scene_html(r: &Report, images: &[(&str, &str)]) -> String {
     // Small renders are shown enlarged (pixelated), so single samples show.
     let zoom = (480 / r.width.max(1)).clamp(1, 4);
     for (label, file) in images {
-        let z = if file.starts_with("composite") {
-            1
+        // The composite (four panels side by side) fits the page width.
+        let (z, class) = if file.starts_with("composite") {
+            (1, " class=\"wide\"")
         } else {
-            zoom
+            (zoom, "")
         };
         let _ = writeln!(
             o,
-            "<figure><img src=\"{}\" alt=\"{}\" style=\"zoom:{z}\"><figcaption>{}</figcaption></figure>",
+            "<figure{class}><img src=\"{}\" alt=\"{}\" style=\"zoom:{z}\"><figcaption>{}</figcaption></figure>",
             esc(file),
             esc(label),
             esc(label)
@@ -293,7 +294,7 @@ pub fn scene_html(r: &Report, images: &[(&str, &str)]) -> String {
     }
     o.push_str("</div>\n<pre>");
     o.push_str(&esc(&r.summary()));
-    o.push_str("</pre>\n<p class=\"legend\">Visibility map: <span style=\"color:#3c78ff\">edge tie</span>, <span style=\"color:#28c850\">depth tie</span>, <span style=\"color:#e650e6\">near tie</span>, <span style=\"color:#ff1e1e\">real</span>. Heat map: black = equal, blue→cyan up to the tolerance, red→yellow above it, grey = shading tie.</p>\n</body></html>\n");
+    o.push_str("</pre>\n<p class=\"legend\">Visibility map: <span style=\"color:#3c78ff\">edge tie</span>, <span style=\"color:#28c850\">depth tie</span>, <span style=\"color:#e650e6\">near tie</span>, <span style=\"color:#ff1e1e\">real</span>. Heat map: black = equal, blue→cyan up to the tolerance, red→yellow above it, grey = shading tie, dark red = not compared (the two sides saw different surfaces there: see the visibility map).</p>\n</body></html>\n");
     o
 }
 
@@ -336,5 +337,5 @@ const LOAD_CHECK: &str = "<script>window.addEventListener('load',function(){var 
 const STYLE: &str = "<style>body{font-family:sans-serif;background:#1e1e22;color:#ddd;margin:2em}\
 h1{font-weight:normal}.pass{color:#5c5}.fail{color:#f55}figure{display:inline-block;margin:0 1em 1em 0}\
 figcaption{font-size:90%;color:#aaa}img{image-rendering:pixelated;border:1px solid #444}\
-img.thumb{height:60px}table{border-collapse:collapse}td,th{padding:4px 10px;border-bottom:1px solid #333;text-align:left}\
+figure.wide{display:block;margin-right:0}figure.wide img{max-width:100%;height:auto}img.thumb{height:60px}table{border-collapse:collapse}td,th{padding:4px 10px;border-bottom:1px solid #333;text-align:left}\
 pre{background:#111;padding:1em}a{color:#8af}</style>\n";

@@ -37,7 +37,7 @@ use crate::coverage::{FillRule, SampleGrid, SnappedTri, Sub8, bbox_samples, doub
 use crate::frame::{BACKGROUND, Frame};
 use crate::math::{Bary, DVec3, to_f64};
 use crate::options::{DepthFormat, ShadowMode};
-use crate::shade::{self, ShadeContext, Unoccluded, Visibility};
+use crate::shade::{self, Unoccluded, Visibility};
 use crate::tri_scene::TriScene;
 use clip::{HVert, clip_polygon, planes};
 
@@ -432,11 +432,31 @@ fn setup_triangle(
             return false;
         }
     }
-    let s0 = poly[0].screen();
+    // A vertex the guard planes made lies on one of them, up to the
+    // rounding of its interpolation; with an extreme dynamic range (a near
+    // plane of 1e-39 against coordinates of 1e33) that rounding can put it
+    // far outside (measured: 1e94 px). Clamping puts it back on the plane it
+    // belongs to; the clip computed each shared point once in a canonical
+    // order, so neighbours still share it bit for bit.
+    let (gx, gy) = (
+        f64::from(ctx.size.0 / ctx.grid.n) + GUARD_PX,
+        f64::from(ctx.size.1 / ctx.grid.n) + GUARD_PX,
+    );
+    let screen = |p: &HVert| {
+        let (x, y) = p.screen();
+        (x.clamp(-GUARD_PX, gx), y.clamp(-GUARD_PX, gy))
+    };
+    if poly.iter().any(|p| {
+        let (x, y) = p.screen();
+        x.is_nan() || y.is_nan()
+    }) {
+        return false;
+    }
+    let s0 = screen(&poly[0]);
     let mut culled = false;
     for k in 1..poly.len() - 1 {
         culled |= push_snapped(
-            &[s0, poly[k].screen(), poly[k + 1].screen()],
+            &[s0, screen(&poly[k]), screen(&poly[k + 1])],
             tri,
             cull_back,
             ctx,
@@ -805,13 +825,7 @@ fn shade_pass(
 ) -> (Frame, u64, usize) {
     let cam = &scene.camera;
     let sw = cam.sample_width();
-    let ctx = ShadeContext {
-        materials: &scene.materials,
-        lights: &scene.lights,
-        ambient_light: scene.ambient_light,
-        gate_eps: opts.gate_eps,
-        shadows: opts.shadows_needed,
-    };
+    let ctx = scene.shade_context(opts.gate_eps, opts.shadows_needed);
     // Shadows: nothing when the plan says no shadow can fall; else a BVH
     // for shadow rays (one `ShadowRays` per row, so its counter is never
     // shared) or the shadow maps.

@@ -40,7 +40,7 @@ use crate::coverage::SampleGrid;
 use crate::frame::Frame;
 use crate::math::{Bary, DVec3, to_f64};
 use crate::options::PainterSort;
-use crate::shade::{self, ShadeContext, Unoccluded, Visibility};
+use crate::shade::{self, Unoccluded, Visibility};
 use crate::tri_scene::TriScene;
 
 /// What ordering the triangles found.
@@ -86,8 +86,12 @@ pub fn order(
     opts: &RasterOptions,
     sort: PainterSort,
 ) -> (Vec<u32>, PainterStats) {
-    let cam = &scene.camera;
-    let grid = SampleGrid::new(cam.samples());
+    order_records(scene, sort, &painter_records(scene, opts))
+}
+
+/// The scan-conversion records of every triangle the options do not cull.
+fn painter_records(scene: &TriScene, opts: &RasterOptions) -> Vec<Record> {
+    let grid = SampleGrid::new(scene.camera.samples());
     let hv = homogeneous(scene, opts.perturb);
     let (recs, _) = records(
         scene,
@@ -102,8 +106,14 @@ pub fn order(
             )
         },
     );
+    recs
+}
+
+/// The drawing rank of the triangles of `recs` (see [`order`]).
+fn order_records(scene: &TriScene, sort: PainterSort, recs: &[Record]) -> (Vec<u32>, PainterStats) {
+    let cam = &scene.camera;
     let (w, h) = (i64::from(cam.width()) * 256, i64::from(cam.height()) * 256);
-    let items = items(scene, &recs, (w, h));
+    let items = items(scene, recs, (w, h));
     let mut stats = PainterStats {
         drawn: items.len(),
         ..PainterStats::default()
@@ -407,30 +417,10 @@ pub fn render(
 pub fn draw_smooth(scene: &TriScene, opts: &RasterOptions, sort: PainterSort) -> Vec<u8> {
     let cam = &scene.camera;
     let (w, h) = (cam.width(), cam.height());
-    let (rank, _) = order(scene, opts, sort);
-    let grid = SampleGrid::new(cam.samples());
-    let hv = homogeneous(scene, opts.perturb);
-    let (mut recs, _) = records(
-        scene,
-        &hv,
-        0..scene.len(),
-        &grid,
-        opts.perturb.fill_rule,
-        |obj| {
-            (
-                opts.frustum_cull.get(obj).copied().unwrap_or(false),
-                opts.backface_cull.get(obj).copied().unwrap_or(false),
-            )
-        },
-    );
+    let mut recs = painter_records(scene, opts);
+    let (rank, _) = order_records(scene, sort, &recs);
     recs.sort_by_key(|r| rank.get(r.tri as usize).copied().unwrap_or(u32::MAX));
-    let ctx = ShadeContext {
-        materials: &scene.materials,
-        lights: &scene.lights,
-        ambient_light: scene.ambient_light,
-        gate_eps: opts.gate_eps,
-        shadows: opts.shadows_needed,
-    };
+    let ctx = scene.shade_context(opts.gate_eps, opts.shadows_needed);
     let accel = opts
         .shadows_needed
         .then(|| Accel::new(scene, AccelOptions::default()));

@@ -95,6 +95,23 @@ const ALLOWED: &[(&str, &[&str])] = &[
             "facade", "accel", "color", "compare", "frame", "image_io", "options", "pov", "scene",
         ],
     ),
+    (
+        "fuzz",
+        &[
+            "facade",
+            "accel",
+            "camera",
+            "frame",
+            "math",
+            "options",
+            "polygon",
+            "raster",
+            "ray",
+            "scene",
+            "texture",
+            "tri_scene",
+        ],
+    ),
 ];
 
 /// `crate::x` references of a source text (first path segment), with

@@ -15,6 +15,8 @@ mod bumps;
 mod cli;
 /// Raster against ray on every scene, and the classifier's negative controls.
 mod differential;
+/// The fuzz corpora and past crashes, replayed.
+mod fuzz_corpus;
 /// Regression images per backend (golden/raster, golden/ray).
 mod golden;
 /// Hidden lines: Appel's QI against ray counts and the z-buffer.

@@ -1,0 +1,7 @@
+//! Fuzz target: `rendiff::fuzz::triangles` (see src/fuzz.rs).
+#![no_main]
+use libfuzzer_sys::fuzz_target;
+
+fuzz_target!(|data: &[u8]| {
+    rendiff::fuzz::triangles(data);
+});

@@ -1,0 +1,70 @@
+//! The fuzz corpora replayed: every input the fuzzers kept
+//! (`fuzz/corpus/TARGET/`) and every crash they ever found
+//! (`fuzz/artifacts/TARGET/`, each fixed and kept as a regression case)
+//! goes through the same entry point as under `cargo fuzz`
+//! (`rendiff::fuzz`), which panics on any failure of its properties.
+
+use std::path::Path;
+
+use crate::util::root;
+
+/// Replays every kept input and past crash of one target through `run`.
+fn replay(name: &str, run: impl Fn(&[u8])) {
+    let corpus = files(&root().join("fuzz/corpus").join(name));
+    let crashes = files(&root().join("fuzz/artifacts").join(name));
+    assert!(!corpus.is_empty(), "{name}: no corpus");
+    for f in corpus.iter().chain(&crashes) {
+        let data = match std::fs::read(f) {
+            Ok(d) => d,
+            // A running fuzzer replaces corpus files as it reduces them.
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => continue,
+            Err(e) => panic!("{}: {e}", f.display()),
+        };
+        let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| run(&data)));
+        assert!(outcome.is_ok(), "{name}: {} fails", f.display());
+    }
+    eprintln!(
+        "{name}: {} corpus inputs, {} past crashes replayed",
+        corpus.len(),
+        crashes.len()
+    );
+}
+
+fn files(dir: &Path) -> Vec<std::path::PathBuf> {
+    let Ok(rd) = std::fs::read_dir(dir) else {
+        return Vec::new();
+    };
+    let mut v: Vec<_> = rd
+        .filter_map(Result::ok)
+        .map(|e| e.path())
+        .filter(|p| p.is_file())
+        .collect();
+    v.sort();
+    v
+}
+
+#[test]
+fn scene_text_corpus_replays_cleanly() {
+    let scenes = root().join("scenes");
+    replay("scene_text", |d| rendiff::fuzz::scene_text(&scenes, d));
+}
+
+#[test]
+fn obj_bytes_corpus_replays_cleanly() {
+    replay("obj_bytes", rendiff::fuzz::obj_bytes);
+}
+
+#[test]
+fn png_bytes_corpus_replays_cleanly() {
+    replay("png_bytes", rendiff::fuzz::png_bytes);
+}
+
+#[test]
+fn polygon_corpus_replays_cleanly() {
+    replay("polygon", rendiff::fuzz::polygon);
+}
+
+#[test]
+fn triangles_corpus_replays_cleanly() {
+    replay("triangles", rendiff::fuzz::triangles);
+}
