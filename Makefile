@@ -56,7 +56,8 @@ fuzz:
 		if [ $$status -ne 0 ]; then \
 			echo "fuzz: $$t failed; see target/fuzz-logs/$$t.log and fuzz/artifacts/$$t" >&2; exit 1; \
 		fi; \
-		$(CARGO) +nightly fuzz cmin -O -a -s none $$t > /dev/null 2>&1 || exit 1; \
+		$(CARGO) +nightly fuzz cmin -O -a -s none $$t > target/fuzz-logs/$$t.cmin.log 2>&1 || { \
+			echo "fuzz: minimising $$t failed; see target/fuzz-logs/$$t.cmin.log" >&2; exit 1; }; \
 	done
 
 ## Benchmarks (release profile).

@@ -70,16 +70,18 @@ pub fn png_bytes(data: &[u8]) {
 fn floats(data: &[u8], n: usize) -> Vec<f32> {
     (0..n)
         .map(|i| {
-            let b: Vec<u8> = (0..4)
-                .map(|k| data.get(4 * i + k).copied().unwrap_or(0))
-                .collect();
-            f32::from_le_bytes([b[0], b[1], b[2], b[3]])
+            let mut b = [0u8; 4];
+            for (k, byte) in b.iter_mut().enumerate() {
+                *byte = data.get(4 * i + k).copied().unwrap_or(0);
+            }
+            f32::from_le_bytes(b)
         })
         .collect()
 }
 
-/// A polygon: the first byte gives the outline's corner count (3 … 34)
-/// and the hole count (0 … 3, each 3 … 6 corners), the rest the
+/// A polygon: the first byte gives the outline's corner count (3 … 34,
+/// its low five bits) and the hole count (0 … 3, its top two bits; each
+/// hole has 4 corners), the rest the
 /// coordinates as f32 (any value: NaN, infinite, repeated, crossing).
 pub fn polygon(data: &[u8]) {
     let Some((&head, rest)) = data.split_first() else {
@@ -117,6 +119,38 @@ pub fn triangles(data: &[u8]) {
     };
     let count = usize::from(head % 24) + 1;
     let f = floats(rest, 12 + 9 * count);
+    let tris: Vec<[Vec3; 3]> = (0..count)
+        .map(|t| {
+            let b = 12 + 9 * t;
+            [0, 3, 6].map(|o| Vec3::new(f[b + o], f[b + o + 1], f[b + o + 2]))
+        })
+        .collect();
+    // Non-finite coordinates never reach a renderer: written as an OBJ
+    // file, the loader must refuse them at the first such vertex's line.
+    // Finite ones of any size (beyond the loader's ±1e12 too) must render
+    // without a panic or a non-finite pixel.
+    if let Some(first) = tris.iter().flatten().position(|p| !p.is_finite()) {
+        let mut obj = String::new();
+        for p in tris.iter().flatten() {
+            obj.push_str(&format!("v {} {} {}\n", p.x, p.y, p.z));
+        }
+        for t in 0..tris.len() {
+            obj.push_str(&format!("f {} {} {}\n", 3 * t + 1, 3 * t + 2, 3 * t + 3));
+        }
+        match crate::scene::obj::load_obj_bytes(Path::new("fuzz.obj"), obj.as_bytes()) {
+            Ok(_) => panic!("an OBJ file with a non-finite vertex was accepted"),
+            Err(e) => {
+                let e = e.to_string();
+                assert!(
+                    e.starts_with(&format!("fuzz.obj:{}:", first + 1))
+                        && e.contains("not a finite number"),
+                    "not refused at line {}: {e}",
+                    first + 1
+                );
+            }
+        }
+        return;
+    }
     let v = |k: usize| DVec3::new(f64::from(f[k]), f64::from(f[k + 1]), f64::from(f[k + 2]));
     let projection = if head & 0x80 == 0 {
         Projection::Perspective {
@@ -142,33 +176,6 @@ pub fn triangles(data: &[u8]) {
     ) else {
         return;
     };
-    let tris: Vec<[Vec3; 3]> = (0..count)
-        .map(|t| {
-            let b = 12 + 9 * t;
-            [0, 3, 6].map(|o| Vec3::new(f[b + o], f[b + o + 1], f[b + o + 2]))
-        })
-        .collect();
-    // Non-finite coordinates never reach a renderer: written as an OBJ
-    // file, the loader must refuse them, naming the line. Finite ones of
-    // any size (beyond the loader's ±1e12 too) must render without a panic
-    // or a non-finite pixel.
-    if tris.iter().flatten().any(|p| !p.is_finite()) {
-        let mut obj = String::new();
-        for p in tris.iter().flatten() {
-            obj.push_str(&format!("v {} {} {}\n", p.x, p.y, p.z));
-        }
-        for t in 0..tris.len() {
-            obj.push_str(&format!("f {} {} {}\n", 3 * t + 1, 3 * t + 2, 3 * t + 3));
-        }
-        match crate::scene::obj::load_obj_bytes(Path::new("fuzz.obj"), obj.as_bytes()) {
-            Ok(_) => panic!("an OBJ file with a non-finite vertex was accepted"),
-            Err(e) => assert!(
-                e.to_string().contains("fuzz.obj:"),
-                "the error names no line: {e}"
-            ),
-        }
-        return;
-    }
     let scene = TriScene::from_triangles(camera, &tris);
     let opts = RasterOptions {
         depth: DepthFormat::F32,

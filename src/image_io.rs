@@ -247,7 +247,7 @@ pub struct LinearImage {
 ///
 /// [`ImageIoError`] when the file is unreadable or not a PNG.
 pub fn read_png_linear(path: &Path) -> Result<LinearImage, ImageIoError> {
-    let bytes = std::fs::read(path).map_err(|source| ImageIoError::Io {
+    let bytes = crate::input::read_file(path).map_err(|source| ImageIoError::Io {
         path: path.to_path_buf(),
         source,
     })?;

@@ -35,6 +35,7 @@ pub mod diff;
 pub mod frame;
 pub mod fuzz;
 pub mod image_io;
+pub mod input;
 pub mod lines;
 pub mod math;
 pub mod options;

@@ -761,6 +761,16 @@ pub fn is_closed(tris: &[[u32; 3]]) -> bool {
         return false;
     }
     let n_verts = tris.iter().flatten().max().map_or(0, |&m| m as usize + 1);
+    if n_verts > 3 * tris.len() {
+        // Sparse indices (never from the tessellator, which welds them
+        // dense): renumber the used ones so the buckets stay O(n).
+        let mut used: Vec<u32> = tris.iter().flatten().copied().collect();
+        used.sort_unstable();
+        used.dedup();
+        let dense = |i: u32| u32::try_from(used.binary_search(&i).unwrap_or(0)).unwrap_or(0);
+        let renumbered: Vec<[u32; 3]> = tris.iter().map(|t| t.map(dense)).collect();
+        return is_closed(&renumbered);
+    }
     // start[a]..start[a + 1]: the heads of the directed edges leaving a.
     let mut start = vec![0usize; n_verts + 1];
     for t in tris {
@@ -1053,9 +1063,28 @@ mod tests {
             }
             let expected = is_closed_by_definition(&tris);
             proptest::prop_assert_eq!(is_closed(&tris), expected);
+            // The same mesh with sparse indices (spread over u32).
+            let spread: Vec<[u32; 3]> = tris
+                .iter()
+                .map(|t| {
+                    // A bijection modulo the prime 2^32 - 5.
+                    t.map(|i| u32::try_from(u64::from(i) * 40_000_003 % 4_294_967_291).unwrap())
+                })
+                .collect();
+            proptest::prop_assert_eq!(is_closed(&spread), expected);
             if edit == 6 {
                 proptest::prop_assert!(expected);
             }
+        }
+    }
+
+    proptest::proptest! {
+        /// Arbitrary triangle soups over a few vertices.
+        #[test]
+        fn is_closed_matches_its_definition_on_soups(
+            tris in proptest::collection::vec(proptest::array::uniform3(0u32..6), 0..12),
+        ) {
+            proptest::prop_assert_eq!(is_closed(&tris), is_closed_by_definition(&tris));
         }
     }
 

@@ -107,7 +107,7 @@ impl Texture {
     ///
     /// [`TextureError`] naming what failed (the caller adds the path).
     pub fn load(path: &Path) -> Result<Texture, TextureError> {
-        let bytes = std::fs::read(path).map_err(|e| TextureError {
+        let bytes = crate::input::read_file(path).map_err(|e| TextureError {
             message: format!("could not read: {e}"),
         })?;
         Texture::from_png_bytes(path, &bytes)

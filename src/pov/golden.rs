@@ -157,11 +157,12 @@ pub fn references(scene: &Scene, tri: &TriScene) -> Result<Vec<Reference>, Golde
             );
             let mut image_hashes = Vec::new();
             for img in &e.images {
-                let bytes =
-                    std::fs::read(&img.source).map_err(|source| image_io::ImageIoError::Io {
+                let bytes = crate::input::read_file(&img.source).map_err(|source| {
+                    image_io::ImageIoError::Io {
                         path: img.source.clone(),
                         source,
-                    })?;
+                    }
+                })?;
                 image_hashes.push((img.name.clone(), fnv1a(&bytes)));
             }
             Ok(Reference {

@@ -303,7 +303,7 @@ impl Scene {
     ///
     /// [`LoadError`] naming the file, the place and what was expected.
     pub fn load(path: &Path) -> Result<Scene, LoadError> {
-        let bytes = std::fs::read(path).map_err(|source| LoadError::Read {
+        let bytes = crate::input::read_file(path).map_err(|source| LoadError::Read {
             path: path.to_path_buf(),
             source,
         })?;
@@ -423,7 +423,7 @@ impl Loader {
         if let Some(tex) = self.textures.get(&path) {
             return Ok(tex.clone());
         }
-        let bytes = std::fs::read(&path).map_err(|e| {
+        let bytes = crate::input::read_file(&path).map_err(|e| {
             t.err(
                 &file.span,
                 key,
@@ -1078,7 +1078,7 @@ impl Loader {
                 let data = if let Some(d) = self.meshes.get(&path) {
                     d.clone()
                 } else {
-                    let bytes = std::fs::read(&path).map_err(|e| {
+                    let bytes = crate::input::read_file(&path).map_err(|e| {
                         t.err(
                             &file.span,
                             "file",

@@ -424,7 +424,7 @@ pub fn load_obj_bytes(path: &Path, bytes: &[u8]) -> Result<MeshData, LoadError> 
 ///
 /// [`LoadError::Read`] or [`LoadError::Mesh`].
 pub fn load_obj(path: &Path) -> Result<MeshData, LoadError> {
-    let bytes = std::fs::read(path).map_err(|source| LoadError::Read {
+    let bytes = crate::input::read_file(path).map_err(|source| LoadError::Read {
         path: path.to_path_buf(),
         source,
     })?;
