@@ -170,20 +170,8 @@ impl<'s> Accel<'s> {
     /// shape `k` within `[t_min, t_max]`?
     fn analytic_bounds_hit(&self, k: usize, o: DVec3, d: DVec3, t_min: f64, t_max: f64) -> bool {
         let (lo, hi) = self.scene.analytic[k].bounds;
-        let (mut a, mut b) = (t_min, t_max);
-        for axis in 0..3 {
-            if d[axis] == 0.0 {
-                if o[axis] < lo[axis] || o[axis] > hi[axis] {
-                    return false;
-                }
-                continue;
-            }
-            let inv = 1.0 / d[axis];
-            let (u, v) = ((lo[axis] - o[axis]) * inv, (hi[axis] - o[axis]) * inv);
-            a = a.max(u.min(v));
-            b = b.min(u.max(v));
-        }
-        a <= b
+        crate::analytic::slab_interval(o, d, lo, hi)
+            .is_some_and(|(t0, t1)| t0.max(t_min) <= t1.min(t_max))
     }
 
     /// The nearest crossing of the world ray with analytic shape `k` in

@@ -235,8 +235,18 @@ impl Placed {
     }
 }
 
-/// The parameter interval where `o + t·d` is inside the box, if any.
+/// The parameter interval where `o + t·d` is inside the box, if any
+/// (finite ends only).
 fn slabs(o: DVec3, d: DVec3, min: DVec3, max: DVec3) -> Option<(f64, f64)> {
+    let (t0, t1) = slab_interval(o, d, min, max)?;
+    (t0 <= t1 && t1.is_finite() && t0.is_finite()).then_some((t0, t1))
+}
+
+/// The slab test: the interval `(t0, t1)` of `o + t·d` between the box's
+/// planes (empty when `t0 > t1`; unbounded ends stay infinite), or `None`
+/// when the ray runs parallel to a slab outside it.
+#[must_use]
+pub fn slab_interval(o: DVec3, d: DVec3, min: DVec3, max: DVec3) -> Option<(f64, f64)> {
     let mut t0 = f64::NEG_INFINITY;
     let mut t1 = f64::INFINITY;
     for axis in 0..3 {
@@ -251,7 +261,7 @@ fn slabs(o: DVec3, d: DVec3, min: DVec3, max: DVec3) -> Option<(f64, f64)> {
         t0 = t0.max(a.min(b));
         t1 = t1.min(a.max(b));
     }
-    (t0 <= t1 && t1.is_finite() && t0.is_finite()).then_some((t0, t1))
+    Some((t0, t1))
 }
 
 /// `F(p)` of the superellipsoid.

@@ -135,6 +135,12 @@ pub fn explain_pixel(
                 if let Some(f) = &f
                     && let Some(t) = f.t
                 {
+                    // The verdict calls two surfaces tied when their
+                    // depths differ by at most δ_a + δ_b (`Oracle::classify`);
+                    // the other surface is not known here, so its δ is taken
+                    // equal to this one's (the window is ±2·tol), and tol
+                    // adds the error of the f32 query ray cast below,
+                    // γ(16)·t, to this footprint's δ.
                     let tol = oracle.depth_tolerance(f) + f64::from(crate::math::gamma(16)) * t;
                     let mut tie = false;
                     #[expect(clippy::cast_possible_truncation, reason = "a window for the f32 ray")]

@@ -442,26 +442,17 @@ fn setup_triangle(
         f64::from(ctx.size.0 / ctx.grid.n) + GUARD_PX,
         f64::from(ctx.size.1 / ctx.grid.n) + GUARD_PX,
     );
-    let screen = |p: &HVert| {
+    let mut pts = Vec::with_capacity(poly.len());
+    for p in poly.iter() {
         let (x, y) = p.screen();
-        (x.clamp(-GUARD_PX, gx), y.clamp(-GUARD_PX, gy))
-    };
-    if poly.iter().any(|p| {
-        let (x, y) = p.screen();
-        x.is_nan() || y.is_nan()
-    }) {
-        return false;
+        if x.is_nan() || y.is_nan() {
+            return false;
+        }
+        pts.push((x.clamp(-GUARD_PX, gx), y.clamp(-GUARD_PX, gy)));
     }
-    let s0 = screen(&poly[0]);
     let mut culled = false;
-    for k in 1..poly.len() - 1 {
-        culled |= push_snapped(
-            &[s0, screen(&poly[k]), screen(&poly[k + 1])],
-            tri,
-            cull_back,
-            ctx,
-            out,
-        );
+    for k in 1..pts.len() - 1 {
+        culled |= push_snapped(&[pts[0], pts[k], pts[k + 1]], tri, cull_back, ctx, out);
     }
     culled
 }
