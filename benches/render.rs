@@ -10,7 +10,7 @@ use std::sync::OnceLock;
 use divan::counter::ItemsCount;
 use divan::{Bencher, black_box};
 use rendiff::accel::{Accel, AccelOptions, ShadowRays};
-use rendiff::math::Ray;
+use rendiff::math::Ray64;
 use rendiff::raster;
 use rendiff::shade::Visibility;
 use rendiff::tri_scene::TriScene;
@@ -72,9 +72,9 @@ fn primary_rays_940k_1080p(bencher: Bencher, threads: usize) {
     let t = &bunny().1;
     let accel = Accel::new(t, AccelOptions::default());
     let cam = &t.camera;
-    let rays: Vec<Ray> = (0..cam.sample_height())
+    let rays: Vec<Ray64> = (0..cam.sample_height())
         .flat_map(|y| (0..cam.sample_width()).map(move |x| (x, y)))
-        .map(|(x, y)| cam.sample_ray(x, y))
+        .map(|(x, y)| cam.sample_ray64(x, y))
         .collect();
     let p = pool(threads);
     bencher.counter(ItemsCount::new(rays.len())).bench(|| {
@@ -100,7 +100,7 @@ fn shadow_rays_940k_1080p(bencher: Bencher, threads: usize) {
     let origins: Vec<rendiff::math::Vec3> = (0..cam.sample_height())
         .flat_map(|y| (0..cam.sample_width()).map(move |x| (x, y)))
         .filter_map(|(x, y)| {
-            let r = cam.sample_ray(x, y);
+            let r = cam.sample_ray64(x, y);
             accel.intersect(&r).map(|h| {
                 let sp = t.surface_at(h.prim, rendiff::math::Bary(h.b));
                 let dir = (light - sp.p).normalize();
@@ -312,9 +312,9 @@ fn flat_loop_vs_bvh<const BVH: bool>(bencher: Bencher, n: usize) {
         })
         .collect();
     let scene = TriScene::from_triangles(cam, &tris);
-    let rays: Vec<Ray> = (0..256)
+    let rays: Vec<Ray64> = (0..256)
         .flat_map(|y| (0..256).map(move |x| (x, y)))
-        .map(|(x, y)| cam.sample_ray(x, y))
+        .map(|(x, y)| cam.sample_ray64(x, y))
         .collect();
     bencher.counter(ItemsCount::new(rays.len())).bench(|| {
         let accel = Accel::new(

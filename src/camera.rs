@@ -6,12 +6,19 @@
 //! so the rasterizer (shading) and the ray tracer (casting) see bit-identical
 //! rays.
 //!
+//! **One eye.** The eye is rounded to the nearest `f32` point once, when
+//! the camera is built, and everything starts from that point: the
+//! rasterizer's projection, the ray tracer's ray origins (which are `f32`),
+//! the verdict's oracle and the POV-Ray export. An eye off the `f32` grid
+//! would otherwise be two eyes, up to half an `f32` step apart: at 10⁶
+//! that is 0.03 units, which moved crossing lines by several pixels.
+//!
 //! Screen coordinates run from (0, 0) at the top-left corner of the image to
 //! (width, height); the sample grid has `n·width × n·height` cells and the
 //! sample `(sx, sy)` of that grid sits at screen point
 //! `((sx + 0.5)/n, (sy + 0.5)/n)`.
 
-use crate::math::{DVec3, Ray, Vec3, to_f32};
+use crate::math::{DVec3, Ray, Ray64, Vec3, to_f32};
 
 /// The two projections.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -38,6 +45,9 @@ pub enum CameraError {
     /// `up` is parallel to the view direction (or zero).
     #[error("up is parallel to the view direction (look_at - eye) or zero")]
     UpParallel,
+    /// The eye is not a finite `f32` point.
+    #[error("the eye is not a finite point in f32 (coordinates beyond ±3.4e38)")]
+    EyeNotFinite,
     /// `near` and `far` are not `0 < near < far`.
     #[error("near ({near}) and far ({far}) must satisfy 0 < near < far")]
     NearFar {
@@ -53,7 +63,8 @@ pub enum CameraError {
 /// # Guarantees
 ///
 /// `f`, `r`, `u` are orthonormal (right-handed: `r = f × up`, `u = r × f`),
-/// `0 < near < far`, `width, height ≥ 1`, `samples ∈ {1, 2, 4, 8, 16}`.
+/// the eye is an `f32` point, `0 < near < far`, `width, height ≥ 1`,
+/// `samples ∈ {1, 2, 4, 8, 16}`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Camera {
     eye: DVec3,
@@ -69,7 +80,8 @@ pub struct Camera {
 }
 
 impl Camera {
-    /// A camera looking from `eye` at `look_at`.
+    /// A camera looking from `eye` (rounded to the nearest `f32` point) at
+    /// `look_at`.
     ///
     /// # Errors
     ///
@@ -89,6 +101,10 @@ impl Camera {
         near: f64,
         far: f64,
     ) -> Result<Camera, CameraError> {
+        let eye = crate::math::to_f64(to_f32(eye));
+        if !eye.is_finite() {
+            return Err(CameraError::EyeNotFinite);
+        }
         let f = (look_at - eye)
             .try_normalize()
             .ok_or(CameraError::EyeAtTarget)?;
@@ -252,21 +268,47 @@ impl Camera {
         }
     }
 
+    /// Parameter `t` at which the primary ray with direction `dir` crosses
+    /// the far plane.
+    #[must_use]
+    pub fn far_t(&self, dir: DVec3) -> f64 {
+        match self.projection {
+            Projection::Perspective { .. } => self.far / dir.dot(self.f),
+            Projection::Orthographic { .. } => self.far,
+        }
+    }
+
     /// The primary ray through screen point `(x, y)` as the `f32` ray every
-    /// backend uses: unit direction, `t_min` at the near plane, `t_max` = ∞.
+    /// backend uses: unit direction, from the near plane to the far plane
+    /// (DESIGN.md §2: surfaces beyond either are not seen).
     #[must_use]
     pub fn primary_ray(&self, x: f64, y: f64) -> Ray {
         let (o, d) = self.primary_ray_f64(x, y);
         #[expect(
             clippy::cast_possible_truncation,
-            reason = "the one rounding of the near distance to f32"
+            reason = "the one rounding of the clip distances to f32"
         )]
-        let t_min = self.near_t(d) as f32;
+        let (t_min, t_max) = (self.near_t(d) as f32, self.far_t(d) as f32);
         Ray {
             origin: to_f32(o),
             dir: to_f32(d),
             t_min,
-            t_max: f32::INFINITY,
+            t_max,
+        }
+    }
+
+    /// The primary ray through screen point `(x, y)` as the ray tracer casts
+    /// it: the `f64` camera ray itself, from the near plane to the far
+    /// plane (the rasterizer projects with the same ray; the `f32` ray of
+    /// [`Camera::primary_ray`] is its rounding, for shading).
+    #[must_use]
+    pub fn primary_ray64(&self, x: f64, y: f64) -> Ray64 {
+        let (o, d) = self.primary_ray_f64(x, y);
+        Ray64 {
+            origin: o,
+            dir: d,
+            t_min: self.near_t(d),
+            t_max: self.far_t(d),
         }
     }
 
@@ -275,6 +317,14 @@ impl Camera {
     pub fn sample_ray(&self, sx: u32, sy: u32) -> Ray {
         let (x, y) = self.sample_point(sx, sy);
         self.primary_ray(x, y)
+    }
+
+    /// The `f64` primary ray of sample `(sx, sy)` of the sample grid (as the
+    /// ray tracer casts it).
+    #[must_use]
+    pub fn sample_ray64(&self, sx: u32, sy: u32) -> Ray64 {
+        let (x, y) = self.sample_point(sx, sy);
+        self.primary_ray64(x, y)
     }
 
     /// View depth `(p − eye)·f`.

@@ -77,6 +77,8 @@ pub enum Output {
         height: u32,
         /// Linear pixels.
         pixels: Vec<Rgb>,
+        /// Read as 16-bit linear (else 8-bit sRGB).
+        linear16: bool,
     },
 }
 
@@ -224,6 +226,7 @@ fn produce(job: &Prepared, side: &Side, max_depth: u32) -> Result<(Output, Optio
                 width: img.width,
                 height: img.height,
                 pixels: img.pixels,
+                linear16: img.linear16,
             }
         }
         Side::Backend(b) => {
@@ -261,6 +264,7 @@ fn produce(job: &Prepared, side: &Side, max_depth: u32) -> Result<(Output, Optio
                 width: img.width,
                 height: img.height,
                 pixels: img.pixels,
+                linear16: img.linear16,
             }
         }
     };
@@ -301,22 +305,30 @@ pub fn diff(job: &Prepared, scene_label: &str, a: &Side, b: &Side) -> Result<Dif
     notes.extend(note_a);
     notes.extend(note_b);
     let cam = &job.tri.camera;
+    let mut tol = tol;
     let (comparison, image_tol_used) = match (&out_a, &out_b) {
         (Output::Frame(fa, _), Output::Frame(fb, _)) => (
             compare::compare_frames(&job.tri, fa, fb, &tol, job.settings.depth),
             None,
         ),
-        _ => (
-            compare::compare_images(
-                cam.width(),
-                cam.height(),
-                out_a.pixels(),
-                out_b.pixels(),
-                &image_tol,
-                tol.shading_max,
-            ),
-            Some(image_tol),
-        ),
+        _ => {
+            // Against a stored image the shading bound is that image's own
+            // rounding (the frames' bit-identity does not apply).
+            tol.shading_max = tol
+                .shading_max
+                .max(image_quantum(&out_a).max(image_quantum(&out_b)));
+            (
+                compare::compare_images(
+                    cam.width(),
+                    cam.height(),
+                    out_a.pixels(),
+                    out_b.pixels(),
+                    &image_tol,
+                    tol.shading_max,
+                ),
+                Some(image_tol),
+            )
+        }
     };
     let mut report = Report::new(
         scene_label,
@@ -340,8 +352,7 @@ pub fn diff(job: &Prepared, scene_label: &str, a: &Side, b: &Side) -> Result<Dif
             out_a.pixels()
         };
         let accel = crate::accel::Accel::new(&job.tri, crate::accel::AccelOptions::default());
-        let oracle =
-            crate::compare::Oracle::new(&job.tri, tol.edge_px, tol.near_eps, job.settings.depth);
+        let oracle = crate::compare::Oracle::new(&job.tri, job.settings.depth);
         #[expect(
             clippy::cast_possible_truncation,
             clippy::cast_sign_loss,
@@ -358,6 +369,21 @@ pub fn diff(job: &Prepared, scene_label: &str, a: &Side, b: &Side) -> Result<Dif
         b: out_b,
         tolerance: tol,
     })
+}
+
+/// Half a code of a stored image's encoding, in linear units (the largest
+/// over its range): a difference below it is the image's own rounding.
+/// 16-bit linear: 0.5/65535; 8-bit sRGB: half the widest step, at the top
+/// of the range (254 → 255). Frames are f32: 0.
+fn image_quantum(out: &Output) -> f64 {
+    match out {
+        Output::Frame(..) => 0.0,
+        Output::Image { linear16: true, .. } => 0.5 / 65535.0,
+        Output::Image { .. } => {
+            let lin = |c: f64| ((c / 255.0 + 0.055) / 1.055).powf(2.4);
+            0.5 * (1.0 - lin(254.0))
+        }
+    }
 }
 
 fn picture(out: &Output, w: u32, h: u32) -> Picture {

@@ -111,8 +111,10 @@ impl Frame {
         (color, &mut self.depth, &mut self.id, &mut self.flags)
     }
 
-    /// Recomputes the pixel colours as the mean of their samples (nothing
-    /// to do with one sample per pixel).
+    /// Recomputes the pixel colours as the mean of their samples, each
+    /// clamped to [0, 1] first (as POV-Ray's anti-aliasing does: a bright
+    /// highlight sample counts as full scale, not more); nothing to do with
+    /// one sample per pixel.
     pub fn resolve(&mut self) {
         if self.samples == 1 {
             return;
@@ -127,7 +129,7 @@ impl Frame {
                 for b in 0..n {
                     let row = (y * n + b) * sw + x * n;
                     for a in 0..n {
-                        acc += self.sample_color[row + a];
+                        acc += self.sample_color[row + a].clamp01();
                     }
                 }
                 self.color[y * self.width as usize + x] = if n == 1 { acc } else { acc * inv };

@@ -33,7 +33,7 @@ use rayon::prelude::*;
 
 use crate::accel::Accel;
 use crate::camera::{Camera, Projection};
-use crate::math::{DVec3, Ray, to_f32, to_f64};
+use crate::math::{DVec3, Ray64, to_f64};
 use crate::tri_scene::TriScene;
 
 /// What to draw.
@@ -286,11 +286,11 @@ pub fn hidden_lines(scene: &TriScene, accel: &Accel<'_>, opts: &LinesOptions) ->
         if len == 0.0 || !len.is_finite() {
             return 0;
         }
-        let ray = Ray {
-            origin: to_f32(origin),
-            dir: to_f32(d / len),
+        let ray = Ray64 {
+            origin,
+            dir: d / len,
             t_min: 0.0,
-            t_max: to_f32(DVec3::splat(len * (1.0 - 1e-6))).x,
+            t_max: len * (1.0 - 1e-6),
         };
         let mut hits: Vec<f32> = Vec::new();
         accel.for_each_triangle_hit(&ray, |t, hit| {
@@ -311,11 +311,11 @@ pub fn hidden_lines(scene: &TriScene, accel: &Accel<'_>, opts: &LinesOptions) ->
         if len == 0.0 || !len.is_finite() {
             return;
         }
-        let ray = Ray {
-            origin: to_f32(e.p[0]),
-            dir: to_f32(d / len),
-            t_min: to_f32(DVec3::splat(len * 1e-6)).x,
-            t_max: to_f32(DVec3::splat(len * (1.0 - 1e-6))).x,
+        let ray = Ray64 {
+            origin: e.p[0],
+            dir: d / len,
+            t_min: len * 1e-6,
+            t_max: len * (1.0 - 1e-6),
         };
         let eye_side = |t: u32, p: DVec3| {
             let v = scene.triangle_f64(t);
@@ -334,7 +334,7 @@ pub fn hidden_lines(scene: &TriScene, accel: &Accel<'_>, opts: &LinesOptions) ->
             }
             // The start on the eye's side: the edge goes behind it.
             let change = if eye_side(t, e.p[0]) > 0.0 { 1 } else { -1 };
-            events.push((f64::from(hit.t) / len, change));
+            events.push((hit.t64 / len, change));
             false
         });
     };

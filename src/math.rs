@@ -51,6 +51,47 @@ impl Ray {
     }
 }
 
+/// A ray in `f64`: `origin + t·dir` for `t` in `[t_min, t_max]`.
+///
+/// The ray queries (`accel`) decide every hit on this ray; the `f32`
+/// [`Ray`] nearest to it walks the BVH, with boxes inflated by the
+/// distance between the two rays, so nothing the `f64` ray meets is
+/// missed. A primary ray is the camera's `f64` ray (the very ray the
+/// rasterizer's projection and the verdict's oracle use); a shadow ray to
+/// a point light ends at the light itself; a reflected or refracted ray,
+/// which starts from an `f32` point with an `f32` direction, is that `f32`
+/// ray widened exactly.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ray64 {
+    /// Origin.
+    pub origin: DVec3,
+    /// Direction (unit length, up to `f64` rounding).
+    pub dir: DVec3,
+    /// Smallest accepted parameter.
+    pub t_min: f64,
+    /// Largest accepted parameter.
+    pub t_max: f64,
+}
+
+impl From<&Ray> for Ray64 {
+    fn from(r: &Ray) -> Ray64 {
+        Ray64 {
+            origin: to_f64(r.origin),
+            dir: to_f64(r.dir),
+            t_min: f64::from(r.t_min),
+            t_max: f64::from(r.t_max),
+        }
+    }
+}
+
+impl Ray64 {
+    /// The point at parameter `t`.
+    #[must_use]
+    pub fn at(&self, t: f64) -> DVec3 {
+        self.origin + self.dir * t
+    }
+}
+
 /// Axis-aligned bounding box. An empty box has `min > max`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Aabb {
@@ -166,20 +207,22 @@ impl Aabb {
 pub struct Bary(pub [f32; 3]);
 
 impl Bary {
-    /// Weights from the two last coordinates (`b0 = 1 − b1 − b2`).
-    #[must_use]
-    pub fn from_b1_b2(b1: f32, b2: f32) -> Bary {
-        Bary([1.0 - b1 - b2, b1, b2])
-    }
-
-    /// Weights from `f64` values, rounded once.
+    /// Weights from `f64` values (any scale: they are divided by their
+    /// sum), rounded once to `f32`. Every backend turns its `f64` weights
+    /// into the `f32` weights it shades with by this one function.
     #[must_use]
     #[expect(
         clippy::cast_possible_truncation,
         reason = "deliberate rounding of the f64 weights to the f32 used for shading"
     )]
     pub fn from_f64(b: [f64; 3]) -> Bary {
-        Bary([b[0] as f32, b[1] as f32, b[2] as f32])
+        let s = b[0] + b[1] + b[2];
+        let n = if s != 0.0 && s.is_finite() {
+            [b[0] / s, b[1] / s, b[2] / s]
+        } else {
+            b
+        };
+        Bary([n[0] as f32, n[1] as f32, n[2] as f32])
     }
 
     /// `w0·a + w1·b + w2·c`.
@@ -193,6 +236,31 @@ impl Bary {
     pub fn interpolate2(&self, v: [Vec2; 3]) -> Vec2 {
         v[0] * self.0[0] + v[1] * self.0[1] + v[2] * self.0[2]
     }
+}
+
+/// Barycentric weights of the point where the line `o + t·d` meets the
+/// triangle's plane, and that `t`, in `f64` (Möller–Trumbore without range
+/// tests); `None` when the line is parallel to the plane.
+///
+/// The verdict's oracle evaluates triangles with it, and both backends
+/// take the weights they shade a camera-ray hit with from it
+/// (`TriScene::view_weights`), so the weights agree bit for bit.
+#[must_use]
+pub fn plane_barycentrics(o: DVec3, d: DVec3, v: [DVec3; 3]) -> Option<([f64; 3], f64)> {
+    let e1 = v[1] - v[0];
+    let e2 = v[2] - v[0];
+    let p = d.cross(e2);
+    let det = e1.dot(p);
+    if det == 0.0 || !det.is_finite() {
+        return None;
+    }
+    let inv = 1.0 / det;
+    let tv = o - v[0];
+    let b1 = tv.dot(p) * inv;
+    let q = tv.cross(e1);
+    let b2 = d.dot(q) * inv;
+    let t = e2.dot(q) * inv;
+    Some(([1.0 - b1 - b2, b1, b2], t))
 }
 
 /// An affine transform of an object: `p_world = m · p_object`.

@@ -19,11 +19,10 @@
 
 use rayon::prelude::*;
 
-use crate::accel::triangle::plane_barycentrics;
 use crate::accel::{Accel, Hit, ShadowRays};
 use crate::color::Rgb;
 use crate::frame::{BACKGROUND, Frame};
-use crate::math::{Bary, DVec3, Ray, Vec3, to_f64};
+use crate::math::{DVec3, Ray, Ray64, Vec3, to_f64};
 use crate::shade::{self, ShadeContext, Shaded, SurfacePoint};
 use crate::tri_scene::TriScene;
 
@@ -214,9 +213,10 @@ impl Tracer<'_, '_> {
     fn sample(&self, sx: u32, sy: u32, w: &mut Worker<'_, '_>) -> SampleOut {
         let cam = &self.scene.camera;
         let (x, y) = cam.sample_point(sx, sy);
-        let (o64, d64) = cam.primary_ray_f64(x, y);
+        let ray64 = cam.primary_ray64(x, y);
+        let (o64, d64) = (ray64.origin, ray64.dir);
         let ray = cam.primary_ray(x, y);
-        let Some(hit) = self.accel.intersect(&ray) else {
+        let Some(hit) = self.accel.intersect(&ray64) else {
             return SampleOut {
                 color: self.scene.background,
                 depth: f32::INFINITY,
@@ -224,7 +224,7 @@ impl Tracer<'_, '_> {
                 flags: 0,
             };
         };
-        let (sp, p64) = self.surface(&hit, o64, d64, &ray);
+        let (sp, p64) = self.surface(&hit, o64, d64);
         let shaded = shade::shade(&self.ctx, &sp, ray.dir, &w.vis);
         let mut inside = self.eye_inside.clone();
         let color =
@@ -239,17 +239,16 @@ impl Tracer<'_, '_> {
         }
     }
 
-    /// Shading inputs and the f64 hit point of a hit of the ray `(o, d)`.
-    fn surface(&self, hit: &Hit, o: DVec3, d: DVec3, ray: &Ray) -> (SurfacePoint, DVec3) {
+    /// Shading inputs and the f64 hit point of a hit of the ray `(o, d)`
+    /// (the `f64` ray the hit was found on).
+    fn surface(&self, hit: &Hit, o: DVec3, d: DVec3) -> (SurfacePoint, DVec3) {
         let scene = self.scene;
         if (hit.prim as usize) < scene.len() {
-            let v = scene.triangle_f64(hit.prim);
-            let b64 = plane_barycentrics(o, d, v).map_or_else(|| hit.b.map(f64::from), |(b, _)| b);
-            let p64 = v[0] * b64[0] + v[1] * b64[1] + v[2] * b64[2];
-            (scene.surface_at(hit.prim, Bary::from_f64(b64)), p64)
+            let (b, p64) = scene.view_weights(hit.prim, o, d);
+            (scene.surface_at(hit.prim, b), p64)
         } else {
             let k = hit.prim as usize - scene.len();
-            let p64 = to_f64(ray.origin) + to_f64(ray.dir) * hit.t64;
+            let p64 = o + d * hit.t64;
             (scene.analytic_surface_at(k, p64), p64)
         }
     }
@@ -257,10 +256,10 @@ impl Tracer<'_, '_> {
     /// Colour along a secondary ray.
     fn trace(&self, w: &mut Worker<'_, '_>, ray: &Ray, depth: Depth, inside: &mut Vec<u32>) -> Rgb {
         w.secondary += 1;
-        let Some(hit) = self.accel.intersect(ray) else {
+        let Some(hit) = self.accel.intersect(&Ray64::from(ray)) else {
             return self.scene.background;
         };
-        let (sp, _) = self.surface(&hit, to_f64(ray.origin), to_f64(ray.dir), ray);
+        let (sp, _) = self.surface(&hit, to_f64(ray.origin), to_f64(ray.dir));
         let shaded = shade::shade(&self.ctx, &sp, ray.dir, &w.vis);
         shaded.local + self.children(w, &sp, &shaded, ray.dir, depth, inside)
     }

@@ -248,9 +248,12 @@ pub trait Visibility: Sync {
     fn transmittance(&self, q: &ShadowQuery) -> Rgb;
 }
 
-/// A shadow ray: the segment `origin + t·dir`, `0 < t < t_max`, toward light
-/// `light`, from a surface whose geometric normal is `normal` (a shadow map
-/// scales its depth bias with the angle between the two; rays ignore it).
+/// A shadow ray: the segment `origin + t·dir`, `0 < t ≤ t_max`, toward light
+/// `light` (for a point light, `dir` and `t_max` aim at the light from
+/// `origin`), from a surface whose geometric normal is `normal` (a shadow
+/// map scales its depth bias with the angle between the two; rays ignore
+/// it). An occluder whose plane passes through the light within the ray's
+/// error does not count ([`occluder_at_light`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ShadowQuery {
     /// Index of the light.
@@ -468,17 +471,25 @@ pub fn shade(ctx: &ShadeContext<'_>, sp: &SurfacePoint, d: Vec3, vis: &dyn Visib
         let mut lc = light.color * light.attenuation(dist);
         if !light.shadowless && ctx.shadows {
             let origin = offset_origin(sp.p, sp.p_error, sp.ng, l);
-            let t_max = if dist.is_finite() {
-                // The light sits at `dist` from p; the offset origin is
-                // within the error bound of p, so shorten by that much.
-                (light_position_distance(light, origin)).max(0.0)
-            } else {
-                f32::INFINITY
+            // A point light: the segment from the offset origin to the
+            // light itself (its end is within `shadow_end_error` of the
+            // light); a parallel light: the direction, without end.
+            let (dir, t_max) = match light.kind {
+                LightKind::Point { position } => {
+                    let v = position - origin;
+                    let len = v.length();
+                    if len > 0.0 && len.is_finite() {
+                        (v / len, len)
+                    } else {
+                        (l, dist)
+                    }
+                }
+                LightKind::Parallel { .. } => (l, f32::INFINITY),
             };
             let tr = vis.transmittance(&ShadowQuery {
                 light: i,
                 origin,
-                dir: l,
+                dir,
                 t_max,
                 normal: sp.ng,
             });
@@ -525,11 +536,31 @@ pub fn shade(ctx: &ShadeContext<'_>, sp: &SurfacePoint, d: Vec3, vis: &dyn Visib
     }
 }
 
-fn light_position_distance(light: &Light, origin: Vec3) -> f32 {
-    match light.kind {
-        LightKind::Point { position } => (position - origin).length(),
-        LightKind::Parallel { .. } => f32::INFINITY,
+/// How far the end of a shadow ray toward a point light, `origin +
+/// t_max·dir`, can lie from the light: `dir` and `t_max` are the `f32`
+/// normalisation of `light − origin` (one rounding per component of the
+/// difference, γ₃ on the length, γ₅ per direction component), so the end
+/// misses the light by at most γ₁₀·`t_max`; γ₁₆ leaves a margin for the
+/// `f64` hit distance it is compared with.
+#[must_use]
+pub fn shadow_end_error(t_max: f32) -> f64 {
+    f64::from(gamma(16)) * f64::from(t_max)
+}
+
+/// `true` when an occluder hit at `t` on a surface with unit normal `n`
+/// does not shadow: its plane passes through the light within the shadow
+/// ray's error ([`shadow_end_error`]), so the hit is the light's own
+/// position seen through rounding. A plane at distance η from the light
+/// is crossed at `t_max − η/|dir·n|`; the hit is set aside when
+/// `(t_max − t)·|dir·n| ≤` the error, i.e. only when η is within it. (A
+/// point light lying in a wall lights the floor, as in POV-Ray.)
+#[must_use]
+pub fn occluder_at_light(q: &ShadowQuery, t: f64, n: Vec3) -> bool {
+    if !q.t_max.is_finite() {
+        return false;
     }
+    let cos = f64::from(q.dir.dot(n).abs());
+    (f64::from(q.t_max) - t) * cos <= shadow_end_error(q.t_max)
 }
 
 /// Snell refraction of unit `d` through a surface with unit normal `n`
@@ -551,12 +582,6 @@ pub fn refract(d: Vec3, n: Vec3, eta: f32) -> Option<Vec3> {
 #[must_use]
 pub fn reflect(d: Vec3, n: Vec3) -> Vec3 {
     d - n * (2.0 * d.dot(n))
-}
-
-/// Error bound of a point formed as `Σ b_i v_i` in `f32` (pbrt-v4: γ(7)·Σ|b_i v_i|).
-#[must_use]
-pub fn interpolation_error(b: [f32; 3], v: [Vec3; 3]) -> Vec3 {
-    ((v[0] * b[0]).abs() + (v[1] * b[1]).abs() + (v[2] * b[2]).abs()) * gamma(7)
 }
 
 #[cfg(test)]
@@ -779,7 +804,8 @@ mod tests {
     #[test]
     fn offset_origin_leaves_the_plane_on_the_ray_side() {
         let p = Vec3::new(1e4, 1.0, 0.0);
-        let err = interpolation_error([0.3, 0.3, 0.4], [p, p, p]);
+        // Half an f32 step of the point's coordinates.
+        let err = p.abs() * crate::math::F32_EPS;
         let o = offset_origin(p, err, Vec3::Y, Vec3::Y);
         assert!(o.y > p.y);
         let o = offset_origin(p, err, Vec3::Y, -Vec3::Y);

@@ -133,7 +133,7 @@ pub fn scene_camera(scene: &Scene, opts: &TessOptions) -> Result<Camera, LoadErr
         },
         ProjectionDesc::Orthographic { view_height } => Projection::Orthographic { view_height },
     };
-    Camera::new(
+    let camera = Camera::new(
         c.eye,
         c.look_at,
         c.up,
@@ -147,7 +147,62 @@ pub fn scene_camera(scene: &Scene, opts: &TessOptions) -> Result<Camera, LoadErr
     .map_err(|e| LoadError::Scene {
         path: scene.path.clone(),
         message: format!("camera: {e}"),
-    })
+    })?;
+    check_resolution(scene, &camera)?;
+    Ok(camera)
+}
+
+/// The smallest angle a pixel may span (perspective), and the smallest
+/// pixel size relative to the eye's distance from the origin
+/// (orthographic): 2⁻³⁰. Below it the `f64` rounding of a camera ray
+/// (γ₆₄(64) ≈ 7e-15 of the coordinates involved, over the few dozen
+/// operations of the projection, the ray–triangle test and the oracle)
+/// would exceed 1/64 px — the widest edge tie — for geometry 2¹⁰ times
+/// farther from the eye than the surface it hides, and the verdict could
+/// not be trusted; such a view is refused rather than judged.
+pub const MIN_PIXEL_ANGLE: f64 = 1.0 / 1_073_741_824.0;
+
+/// Refuses a view too narrow for `f64` camera rays ([`MIN_PIXEL_ANGLE`]).
+fn check_resolution(scene: &Scene, camera: &Camera) -> Result<(), LoadError> {
+    let h = f64::from(camera.height());
+    let fail = |key: &str, message: String| LoadError::Scene {
+        path: scene.path.clone(),
+        message: format!("camera.{key}: {message}"),
+    };
+    match camera.projection() {
+        Projection::Perspective { tan_half_fov: t } => {
+            // The smallest pixel angle is at the image corners.
+            let a = camera.aspect();
+            let corner = 1.0 / (1.0 + t * t * (1.0 + a * a));
+            let angle = 2.0 * t / h * corner;
+            if angle.is_nan() || angle < MIN_PIXEL_ANGLE {
+                return Err(fail(
+                    "fov_y",
+                    format!(
+                        "a field of view this narrow gives pixels {angle:.3e} rad wide at {}x{}, below the {MIN_PIXEL_ANGLE:.3e} rad that f64 camera rays resolve; widen it or render fewer pixels",
+                        camera.width(),
+                        camera.height()
+                    ),
+                ));
+            }
+        }
+        Projection::Orthographic { view_height } => {
+            let size = view_height / h;
+            let reach = camera.eye().abs().max_element() + view_height;
+            if size.is_nan() || size < MIN_PIXEL_ANGLE * reach {
+                return Err(fail(
+                    "view_height",
+                    format!(
+                        "a view {view_height:.3e} high at {:.3e} from the origin gives pixels {size:.3e} across at {}x{}, below the {MIN_PIXEL_ANGLE:.3e} of that distance that f64 camera rays resolve; enlarge it, move the scene nearer the origin or render fewer pixels",
+                        reach - view_height,
+                        camera.width(),
+                        camera.height()
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Largest singular value of a 3×3 matrix (power iteration on MᵀM).
@@ -597,7 +652,7 @@ pub fn tessellate(scene: &Scene, opts: &TessOptions) -> Result<TriScene, LoadErr
         let piece = object_piece(scene, obj, &camera, err_px, &mut out.warnings, &mut budget)?;
         append(scene, obj, piece, &mut out)?;
     }
-    check_precision(scene, &out, &camera)?;
+    check_precision(scene, &mut out, &camera)?;
     // far: just beyond the farthest corner of the bounds (DESIGN.md §2).
     let far = match scene.camera.far {
         Some(f) => f,
@@ -629,6 +684,12 @@ pub const MIN_EXTENT: f64 = 1e-10;
 /// stored positions moves vertices by more than 1/2048 of the scene.
 pub const MIN_EXTENT_STEPS: f64 = 2048.0;
 
+/// The least number of f32 steps an object must span at its own position
+/// (refused below; warned below [`MIN_EXTENT_STEPS`]): below 2⁸ rounding
+/// moves its vertices by more than 1/256 of its size, a 2.5-unit object
+/// at 10⁶ (40 steps) is a pile of f32 grid points.
+pub const MIN_OBJECT_STEPS: f64 = 256.0;
+
 /// Rejects scenes whose geometry f32 arithmetic cannot represent
 /// (DESIGN.md §8): too small an extent for the products the ray-triangle
 /// test forms, or too small for its distance from the origin. (Too large
@@ -636,7 +697,7 @@ pub const MIN_EXTENT_STEPS: f64 = 2048.0;
 /// [`MAX_COORDINATE`].)
 fn check_precision(
     scene: &Scene,
-    out: &TriScene,
+    out: &mut TriScene,
     camera: &crate::camera::Camera,
 ) -> Result<(), LoadError> {
     let b = out.bounds;
@@ -662,6 +723,36 @@ fn check_precision(
             extent / step
         )));
     }
+    // The same for every object at its own position: a small object far
+    // out is crushed onto the f32 grid there, however large the rest of
+    // the scene (a far marker widens the scene's bounds, not its steps).
+    // Below MIN_OBJECT_STEPS it is refused; below MIN_EXTENT_STEPS warned.
+    let mut warnings = Vec::new();
+    for o in &out.objects {
+        if o.bounds.is_empty() {
+            continue;
+        }
+        let (lo, hi) = (to_f64(o.bounds.min), to_f64(o.bounds.max));
+        let extent = (hi - lo).length();
+        let largest = lo.abs().max(hi.abs()).max_element();
+        let step = largest * f64::from(f32::EPSILON);
+        if extent < MIN_OBJECT_STEPS * step {
+            return Err(fail(format!(
+                "{} spans {extent:.3e} units at {largest:.3e} from the origin: only {:.0} f32 steps, fewer than the {MIN_OBJECT_STEPS} needed to keep its shape (rounding moves its vertices by more than 1/{MIN_OBJECT_STEPS} of it); move it nearer the origin or enlarge it",
+                o.label,
+                extent / step
+            )));
+        }
+        if extent < MIN_EXTENT_STEPS * step {
+            warnings.push(format!(
+                "{} spans only {:.0} f32 steps at {largest:.3e} from the origin (fewer than {MIN_EXTENT_STEPS}): its vertices are rounded by up to 1/{:.0} of its size, which may show in its shading",
+                o.label,
+                extent / step,
+                extent / step
+            ));
+        }
+    }
+    out.warnings.extend(warnings);
     Ok(())
 }
 

@@ -11,8 +11,10 @@ use std::ops::Range;
 use crate::analytic::{AnalyticKind, Placed};
 use crate::camera::Camera;
 use crate::color::Rgb;
-use crate::math::{Aabb, Bary, DVec3, Vec2, Vec3, to_f32, to_f64};
-use crate::shade::{Light, Material, ShadeContext, SurfacePoint, interpolation_error};
+use crate::math::{
+    Aabb, Bary, DVec3, F32_EPS, Vec2, Vec3, gamma64, plane_barycentrics, to_f32, to_f64,
+};
+use crate::shade::{Light, Material, ShadeContext, SurfacePoint};
 
 /// "No normal" / "no uv" in a corner index triple.
 pub const NO_INDEX: u32 = u32::MAX;
@@ -320,17 +322,41 @@ impl TriScene {
         }
     }
 
+    /// The weights a camera ray `(o, d)` (the `f64` primary ray of a
+    /// sample) meets triangle `tri` at, as both backends shade them, and
+    /// the `f64` point they give (for the frame's depth).
+    ///
+    /// The rasterizer (for each visible sample) and the ray tracer (for
+    /// each primary hit) both call this, so a sample that sees the same
+    /// triangle in both is shaded from bit-identical inputs. Where the ray
+    /// is parallel to the triangle's plane (it cannot be seen there, but
+    /// snapping can leave a sliver) the centroid stands in.
+    #[must_use]
+    pub fn view_weights(&self, tri: u32, o: DVec3, d: DVec3) -> (Bary, DVec3) {
+        let v = self.triangle_f64(tri);
+        let w = plane_barycentrics(o, d, v).map_or([1.0 / 3.0; 3], |(w, _)| w);
+        let b = Bary::from_f64(w);
+        let s = w[0] + w[1] + w[2];
+        let p = (v[0] * w[0] + v[1] * w[1] + v[2] * w[2]) / s;
+        (b, p)
+    }
+
     /// Shading inputs of triangle `tri` at barycentric weights `b`.
     ///
     /// Both backends call this. If the raster and ray images differ on a
     /// sample, the cause is which triangle and which `b` they found there,
     /// never how the point was shaded.
+    ///
+    /// The point is formed in `f64` with the weights divided by their sum
+    /// (so it lies on the triangle's plane up to `f64` rounding) and
+    /// rounded to `f32` once: its distance from the plane is at most half
+    /// an `f32` step of its own coordinates plus ~10⁻¹⁶ of the vertices,
+    /// which is what `p_error` bounds (the offset of rays leaving it).
     #[must_use]
     pub fn surface_at(&self, tri: u32, b: Bary) -> SurfacePoint {
         let i = tri as usize;
         let v = self.triangle(tri);
-        let p = b.interpolate(v);
-        let p_error = interpolation_error(b.0, v);
+        let (p, p_error) = plane_point(v, b);
         let mut ng = self.geometric_normal(tri);
         let n_idx = self.tri_normals[i];
         let mut ns = if n_idx[0] == NO_INDEX {
@@ -441,6 +467,32 @@ impl TriScene {
             + self.tri_material.len() * size_of::<u16>()
             + self.tri_object.len() * size_of::<u32>()
     }
+}
+
+/// The point `Σ b_i v_i / Σ b_i`, formed in `f64` and rounded to `f32`
+/// once, and a bound per axis on its distance from the exact point of the
+/// triangle's plane with those weights: the final rounding (2⁻²⁴ of each
+/// coordinate) plus the `f64` arithmetic (γ₈ of `Σ|b_i v_i|`), rounded up.
+fn plane_point(v: [Vec3; 3], b: Bary) -> (Vec3, Vec3) {
+    let w = b.0.map(f64::from);
+    let sum = w[0] + w[1] + w[2];
+    let s = if sum != 0.0 && sum.is_finite() {
+        sum
+    } else {
+        1.0
+    };
+    let v64 = v.map(to_f64);
+    let p64 = (v64[0] * w[0] + v64[1] * w[1] + v64[2] * w[2]) / s;
+    let p = to_f32(p64);
+    let spread = (v64[0] * w[0]).abs() + (v64[1] * w[1]).abs() + (v64[2] * w[2]).abs();
+    let err = to_f64(p).abs() * f64::from(F32_EPS) + spread * (gamma64(8) / s.abs());
+    // Rounded up, so the f32 bound never falls below the f64 one.
+    let up = |x: f64| {
+        #[expect(clippy::cast_possible_truncation, reason = "rounded up just after")]
+        let r = x as f32;
+        if f64::from(r) < x { r.next_up() } else { r }
+    };
+    (p, Vec3::new(up(err.x), up(err.y), up(err.z)))
 }
 
 /// POV-Ray's spherical map (POVRAY.md §9.1) of a unit direction in the

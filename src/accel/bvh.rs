@@ -14,8 +14,8 @@
 
 use glam::Vec4;
 
-use super::triangle::{RayPrecomp, TriHit, TriPack, candidates, intersect};
-use crate::math::{Aabb, Ray, Vec3, gamma};
+use super::triangle::{RayPrecomp, TriHit, TriPack, candidates, f32_at_least, intersect};
+use crate::math::{Aabb, Ray64, Vec3, gamma, to_f64};
 
 /// Child slot encoding: the high bit marks a leaf.
 const LEAF: u32 = 1 << 31;
@@ -86,8 +86,10 @@ pub struct BvhStats {
 /// A closest hit.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BvhHit {
-    /// Ray parameter.
+    /// Ray parameter (rounded from `t64`).
     pub t: f32,
+    /// Ray parameter in `f64`.
+    pub t64: f64,
     /// Triangle id.
     pub id: u32,
     /// Barycentrics from the watertight test.
@@ -555,25 +557,42 @@ impl Bvh {
         }
     }
 
+    /// The farthest `t` at which `ray` can meet a triangle of the tree:
+    /// the distance to the far side of the bounds' bounding sphere.
+    fn reach(&self, ray: &Ray64) -> f64 {
+        let (c, r) = self.bounds.bounding_sphere();
+        (ray.origin - to_f64(c)).length() + f64::from(r) * (1.0 + 1e-6)
+    }
+
     /// The closest hit with `t` in `[ray.t_min, ray.t_max]`; equal `t`
-    /// goes to the lower triangle id.
+    /// (in `f64`, as the triangle test decides it) goes to the lower
+    /// triangle id.
     #[must_use]
-    pub fn intersect(&self, ray: &Ray) -> Option<BvhHit> {
-        let pre = RayPrecomp::new(ray);
+    pub fn intersect(&self, ray: &Ray64) -> Option<BvhHit> {
+        let pre = RayPrecomp::new(ray, self.reach(ray));
         let mut best: Option<BvhHit> = None;
-        let mut t_best = ray.t_max;
-        self.traverse(ray, &mut t_best, true, |first, t_best| {
-            self.leaf_hits(&pre, first, ray.t_min, t_best, |id, h, t_best| {
+        let (t_min, mut best_t) = pre.t_range();
+        let mut t_prune = pre.ray.t_max;
+        self.traverse(&pre, &mut t_prune, true, |first, t_prune| {
+            self.leaf_hits(&pre, first, t_min, &mut best_t, |id, h, best_t| {
                 let better = match best {
                     None => true,
-                    Some(b) => h.t < b.t || (h.t == b.t && id < b.id),
+                    Some(b) => h.t64 < b.t64 || (h.t64 == b.t64 && id < b.id),
                 };
                 if better {
-                    best = Some(BvhHit { t: h.t, id, b: h.b });
-                    *t_best = h.t;
+                    best = Some(BvhHit {
+                        t: h.t,
+                        t64: h.t64,
+                        id,
+                        b: h.b,
+                    });
+                    *best_t = h.t64;
                 }
                 false
-            })
+            });
+            // Boxes are pruned in f32: never below the f64 distance.
+            *t_prune = f32_at_least(best_t);
+            false
         });
         best
     }
@@ -581,25 +600,27 @@ impl Bvh {
     /// Calls `visit(id, hit)` for every triangle hit with `t` in
     /// `[ray.t_min, ray.t_max]`, in no particular order; stops when `visit`
     /// returns `true`.
-    pub fn for_each_hit(&self, ray: &Ray, mut visit: impl FnMut(u32, TriHit) -> bool) {
-        let pre = RayPrecomp::new(ray);
-        let mut t_max = ray.t_max;
-        self.traverse(ray, &mut t_max, false, |first, t_max| {
-            self.leaf_hits(&pre, first, ray.t_min, t_max, |id, h, _| visit(id, h))
+    pub fn for_each_hit(&self, ray: &Ray64, mut visit: impl FnMut(u32, TriHit) -> bool) {
+        let pre = RayPrecomp::new(ray, self.reach(ray));
+        let mut t_prune = pre.ray.t_max;
+        let (t_min, mut t_max) = pre.t_range();
+        self.traverse(&pre, &mut t_prune, false, |first, _| {
+            self.leaf_hits(&pre, first, t_min, &mut t_max, |id, h, _| visit(id, h))
         });
     }
 
     /// Tests the leaf starting at pack `first`: four triangles at a time
-    /// for the edge test ([`candidates`]), then the survivors one by one;
-    /// `hit(id, hit, t_max)` may shrink `t_max` and returns `true` to stop.
+    /// for the edge test ([`candidates`]), then the survivors one by one
+    /// in `f64`; `hit(id, hit, t_max)` may shrink `t_max` and returns
+    /// `true` to stop.
     #[inline]
     fn leaf_hits(
         &self,
         pre: &RayPrecomp,
         first: usize,
-        t_min: f32,
-        t_max: &mut f32,
-        mut hit: impl FnMut(u32, TriHit, &mut f32) -> bool,
+        t_min: f64,
+        t_max: &mut f64,
+        mut hit: impl FnMut(u32, TriHit, &mut f64) -> bool,
     ) -> bool {
         let mut p = first;
         loop {
@@ -628,11 +649,12 @@ impl Bvh {
     #[inline]
     fn traverse(
         &self,
-        ray: &Ray,
+        pre: &RayPrecomp,
         t_max: &mut f32,
         ordered: bool,
         mut leaf: impl FnMut(usize, &mut f32) -> bool,
     ) {
+        let ray = &pre.ray;
         if self.root == EMPTY {
             return;
         }
@@ -655,11 +677,24 @@ impl Bvh {
             1.0 / safe(ray.dir.y),
             1.0 / safe(ray.dir.z),
         );
-        let (ox, oy, oz) = (
-            Vec4::splat(ray.origin.x),
-            Vec4::splat(ray.origin.y),
-            Vec4::splat(ray.origin.z),
-        );
+        // Boxes inflated by the drift between the f32 ray and the f64 ray
+        // it stands for (zero when they are the same ray): the lower
+        // planes are met from the origin moved up by it, the upper planes
+        // from the origin moved down, rounded outward.
+        let e = pre.inflate;
+        let shift = |o: f32, up: bool| {
+            if e == 0.0 {
+                o
+            } else if up {
+                (o + e).next_up()
+            } else {
+                (o - e).next_down()
+            }
+        };
+        let lo_o = |o: f32| Vec4::splat(shift(o, true));
+        let hi_o = |o: f32| Vec4::splat(shift(o, false));
+        let (ox0, oy0, oz0) = (lo_o(ray.origin.x), lo_o(ray.origin.y), lo_o(ray.origin.z));
+        let (ox1, oy1, oz1) = (hi_o(ray.origin.x), hi_o(ray.origin.y), hi_o(ray.origin.z));
         let (ix, iy, iz) = (Vec4::splat(inv.x), Vec4::splat(inv.y), Vec4::splat(inv.z));
         let grow = 1.0 + 2.0 * gamma(3);
         let t_min4 = Vec4::splat(ray.t_min);
@@ -685,12 +720,12 @@ impl Bvh {
                 }
             } else {
                 let n = &self.nodes[node as usize];
-                let tx0 = (n.min_x - ox) * ix;
-                let tx1 = (n.max_x - ox) * ix;
-                let ty0 = (n.min_y - oy) * iy;
-                let ty1 = (n.max_y - oy) * iy;
-                let tz0 = (n.min_z - oz) * iz;
-                let tz1 = (n.max_z - oz) * iz;
+                let tx0 = (n.min_x - ox0) * ix;
+                let tx1 = (n.max_x - ox1) * ix;
+                let ty0 = (n.min_y - oy0) * iy;
+                let ty1 = (n.max_y - oy1) * iy;
+                let tz0 = (n.min_z - oz0) * iz;
+                let tz1 = (n.max_z - oz1) * iz;
                 let tn = tx0.min(tx1).max(ty0.min(ty1)).max(tz0.min(tz1)).max(t_min4);
                 let tf = tx0.max(tx1).min(ty0.max(ty1)).min(tz0.max(tz1)) * grow;
                 let tf = tf.min(Vec4::splat(*t_max * grow));

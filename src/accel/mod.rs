@@ -10,7 +10,7 @@ pub mod triangle;
 
 use crate::analytic::sphere::sphere_roots;
 use crate::color::Rgb;
-use crate::math::{DVec3, Ray, Vec3, to_f64};
+use crate::math::{DVec3, Ray64, Vec3, to_f64};
 use crate::options::Geometry;
 use crate::shade::{ShadowQuery, Visibility};
 use crate::tri_scene::TriScene;
@@ -131,20 +131,21 @@ impl<'s> Accel<'s> {
         self.bvh.stats()
     }
 
-    /// The closest hit in `[ray.t_min, ray.t_max]` (ties: lower id).
+    /// The closest hit in `[ray.t_min, ray.t_max]` (ties: lower id), on the
+    /// `f64` ray (see [`Ray64`]).
     #[must_use]
-    pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
+    pub fn intersect(&self, ray: &Ray64) -> Option<Hit> {
         let mut best = self.bvh.intersect(ray).map(|h| Hit {
             t: h.t,
             prim: h.id,
             b: h.b,
-            t64: f64::from(h.t),
+            t64: h.t64,
         });
         if !self.analytic.is_empty() {
-            let (o, d) = (to_f64(ray.origin), to_f64(ray.dir));
+            let (o, d) = (ray.origin, ray.dir);
             for &k in &self.analytic {
-                let t_max = best.map_or(f64::from(ray.t_max), |h| h.t64);
-                if let Some(t) = self.first_analytic(k, o, d, f64::from(ray.t_min), t_max) {
+                let t_max = best.map_or(ray.t_max, |h| h.t64);
+                if let Some(t) = self.first_analytic(k, o, d, ray.t_min, t_max) {
                     let prim = self.scene.analytic_id(k);
                     #[expect(
                         clippy::cast_possible_truncation,
@@ -220,7 +221,7 @@ impl<'s> Accel<'s> {
     /// order; stops when `visit` returns `true`.
     pub fn for_each_triangle_hit(
         &self,
-        ray: &Ray,
+        ray: &Ray64,
         visit: impl FnMut(u32, triangle::TriHit) -> bool,
     ) {
         self.bvh.for_each_hit(ray, visit);
@@ -249,11 +250,11 @@ impl<'s> Accel<'s> {
         if !info.closed || !info.bounds.contains(p) {
             return false;
         }
-        let ray = Ray {
-            origin: p,
-            dir: Vec3::new(0.577_215_7, 0.291_3, 0.751_942_6).normalize(),
+        let ray = Ray64 {
+            origin: to_f64(p),
+            dir: to_f64(Vec3::new(0.577_215_7, 0.291_3, 0.751_942_6).normalize()),
             t_min: 0.0,
-            t_max: f32::INFINITY,
+            t_max: f64::INFINITY,
         };
         let mut crossings = 0u32;
         self.bvh.for_each_hit(&ray, |id, _| {
@@ -294,54 +295,110 @@ impl<'a, 's> ShadowRays<'a, 's> {
     }
 }
 
+/// The shadow ray of a query: to a point light, the `f64` segment from the
+/// origin to the light itself; to a parallel light, the query's `f32` ray.
+fn shadow_ray(scene: &TriScene, q: &ShadowQuery) -> Ray64 {
+    let o = to_f64(q.origin);
+    if let Some(light) = scene.lights.get(q.light)
+        && let crate::shade::LightKind::Point { position } = light.kind
+    {
+        let v = to_f64(position) - o;
+        let len = v.length();
+        if len > 0.0 && len.is_finite() {
+            return Ray64 {
+                origin: o,
+                dir: v / len,
+                t_min: 0.0,
+                t_max: len,
+            };
+        }
+    }
+    Ray64 {
+        origin: o,
+        dir: to_f64(q.dir),
+        t_min: 0.0,
+        t_max: f64::from(q.t_max),
+    }
+}
+
+/// `true` when triangle `tri`'s plane passes through `light` up to the
+/// rounding of evaluating it: the shadow ray then meets the triangle at the
+/// light itself, and the triangle does not shadow it (a point light lying
+/// in a wall lights the floor, as in POV-Ray). The plane distance is
+/// `n·(L − v0)` with `n = (v1 − v0) × (v2 − v0)`, in `f64`: each
+/// component of `n` is within `γ₃(|e1_j e2_k| + |e1_k e2_j|)` and the dot
+/// product adds `γ₃` of `Σ|n_i Δ_i|`; twice the sum of those is the test.
+fn plane_through(scene: &TriScene, tri: u32, light: DVec3) -> bool {
+    let v = scene.triangle_f64(tri);
+    let (e1, e2) = (v[1] - v[0], v[2] - v[0]);
+    let n = e1.cross(e2);
+    let spread = DVec3::new(
+        (e1.y * e2.z).abs() + (e1.z * e2.y).abs(),
+        (e1.z * e2.x).abs() + (e1.x * e2.z).abs(),
+        (e1.x * e2.y).abs() + (e1.y * e2.x).abs(),
+    );
+    let delta = light - v[0];
+    let dist = n.dot(delta).abs();
+    let g = crate::math::gamma64(4);
+    dist <= 2.0 * g * (n.abs() + spread).dot(delta.abs())
+}
+
+/// `true` when a crossing of an analytic shape at `t` is the light itself:
+/// within the crossing's own error bound `p_error` (and the ray's `f64`
+/// rounding) of the segment's end.
+fn analytic_at_light(ray: &Ray64, t: f64, p_error: Vec3) -> bool {
+    ray.t_max.is_finite()
+        && (ray.t_max - t).abs()
+            <= to_f64(p_error).length() * 2.0 + crate::math::gamma64(16) * ray.t_max
+}
+
 impl Visibility for ShadowRays<'_, '_> {
     fn transmittance(&self, q: &ShadowQuery) -> Rgb {
-        let (origin, dir, t_max) = (q.origin, q.dir, q.t_max);
         let a = self.accel;
         if !a.any_caster {
             return Rgb::WHITE;
         }
         self.cast.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        let ray = Ray {
-            origin,
-            dir,
-            t_min: 0.0,
-            t_max,
-        };
-        // Every crossing: (t, id, barycentrics); an opaque one ends it.
-        let mut crossings: Vec<(f32, u32, [f32; 3])> = Vec::new();
+        let scene = a.scene;
+        let ray = shadow_ray(scene, q);
+        let light = ray.at(ray.t_max);
+        // Every crossing: (t, id, barycentrics); an opaque one ends it. A
+        // surface through the light itself is not an occluder.
+        let mut crossings: Vec<(f64, u32, [f32; 3])> = Vec::new();
         let mut blocked = false;
-        a.bvh
-            .for_each_hit(&ray, |id, h| match a.class[id as usize] {
-                ShadowClass::Opaque => {
-                    blocked = true;
-                    true
-                }
-                ShadowClass::Transparent => {
-                    crossings.push((h.t, id, h.b));
-                    false
-                }
-                ShadowClass::None => false,
-            });
+        a.bvh.for_each_hit(&ray, |id, h| {
+            let class = a.class[id as usize];
+            if class == ShadowClass::None
+                || (ray.t_max.is_finite() && plane_through(scene, id, light))
+            {
+                return false;
+            }
+            if class == ShadowClass::Opaque {
+                blocked = true;
+                return true;
+            }
+            crossings.push((h.t64, id, h.b));
+            false
+        });
         if blocked {
             return Rgb::BLACK;
         }
-        let (o, d) = (to_f64(origin), to_f64(dir));
+        let (o, d) = (ray.origin, ray.dir);
         let mut ts = Vec::new();
         for &k in &a.analytic {
             if a.analytic_class[k] == ShadowClass::None {
                 continue;
             }
-            a.analytic_crossings(k, o, d, f64::from(t_max), &mut ts);
+            a.analytic_crossings(k, o, d, ray.t_max, &mut ts);
             for &t in &ts {
+                let p_error = scene.analytic_surface_at(k, o + d * t).p_error;
+                if analytic_at_light(&ray, t, p_error) {
+                    continue;
+                }
                 match a.analytic_class[k] {
                     ShadowClass::Opaque => return Rgb::BLACK,
                     ShadowClass::Transparent => {
-                        #[expect(
-                            clippy::cast_possible_truncation,
-                            reason = "f32 copy for ordering"
-                        )]
-                        crossings.push((t as f32, a.scene.analytic_id(k), [0.0; 3]));
+                        crossings.push((t, a.scene.analytic_id(k), [0.0; 3]));
                     }
                     ShadowClass::None => {}
                 }
@@ -353,14 +410,13 @@ impl Visibility for ShadowRays<'_, '_> {
         // Multiply in order of increasing t (ties: lower id): the result
         // does not depend on the traversal order.
         crossings.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
-        let scene = a.scene;
         let mut tr = Rgb::WHITE;
         for (t, id, b) in crossings {
             let sp = if (id as usize) < scene.len() {
                 scene.surface_at(id, crate::math::Bary(b))
             } else {
                 let k = id as usize - scene.len();
-                scene.analytic_surface_at(k, to_f64(ray.at(t)))
+                scene.analytic_surface_at(k, o + d * t)
             };
             let m = &scene.materials[usize::from(sp.material)];
             let (p, f, t) = m.pigment_at(sp.uv);

@@ -130,11 +130,22 @@ impl AnalyticKind {
                 }
             }
             AnalyticKind::Superellipsoid { e, n } => {
-                let Some((a, b)) = slabs(o, d, DVec3::splat(-1.0), DVec3::ONE) else {
+                let Some((a0, b0)) = slabs(o, d, DVec3::splat(-1.0), DVec3::ONE) else {
                     return;
                 };
-                let (mut a, b) = (a.max(t_min), b.min(t_max));
+                let (mut a, b) = (a0.max(t_min), b0.min(t_max));
                 let width = (b - a) * 1e-9;
+                let start = out.len();
+                // The surface lies inside its box and touches the box's
+                // faces; with small exponents it is flat there to the
+                // last bits (F = −1e-15 on a face, e = 0.1), so where the
+                // ray meets the box on such a flat the box's own plane is
+                // the crossing.
+                let on_flat = |t: f64| se_value(o + d * t, e, n) <= 0.0;
+                if a == a0 && a > t_min && a <= t_max && on_flat(a) {
+                    out.push(a);
+                    a += width.max(a.abs() * 1e-12);
+                }
                 while a < b {
                     match se_first_root(o, d, e, n, a, b, width) {
                         Some(t) => {
@@ -147,6 +158,9 @@ impl AnalyticKind {
                         None => break,
                     }
                 }
+                if b == b0 && b > t_min && on_flat(b) && (out.len() - start) % 2 == 1 {
+                    out.push(b);
+                }
             }
         }
     }
@@ -156,10 +170,15 @@ impl AnalyticKind {
     pub fn first(&self, o: DVec3, d: DVec3, t_min: f64, t_max: f64) -> Option<f64> {
         match *self {
             AnalyticKind::Superellipsoid { e, n } => {
-                let (a, b) = slabs(o, d, DVec3::splat(-1.0), DVec3::ONE)?;
-                let (a, b) = (a.max(t_min), b.min(t_max));
+                let (a0, b0) = slabs(o, d, DVec3::splat(-1.0), DVec3::ONE)?;
+                let (a, b) = (a0.max(t_min), b0.min(t_max));
                 if a >= b {
                     return None;
+                }
+                // Entering through a flat of the surface that coincides
+                // with the box face (see `crossings`).
+                if a == a0 && a > t_min && se_value(o + d * a, e, n) <= 0.0 {
+                    return Some(a);
                 }
                 se_first_root(o, d, e, n, a, b, (b - a) * 1e-9).filter(|&t| t > t_min)
             }

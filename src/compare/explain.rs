@@ -32,7 +32,7 @@ use serde::Serialize;
 use super::oracle::Oracle;
 use crate::accel::Accel;
 use crate::frame::{BACKGROUND, Frame};
-use crate::math::Ray;
+use crate::math::Ray64;
 use crate::shade::FLAG_DISCONTINUITY;
 
 /// Why a pixel differs.
@@ -96,9 +96,9 @@ pub fn explain_pixel(
             let i = (sy * sw + sx) as usize;
             let id = frame.id[i];
             let (px, py) = cam.sample_point(sx, sy);
-            let ray = cam.primary_ray(px, py);
+            let ray = cam.primary_ray64(px, py);
             // Before the near plane: any hit between the eye and near.
-            let before = Ray {
+            let before = Ray64 {
                 t_min: 0.0,
                 t_max: ray.t_min,
                 ..ray
@@ -138,15 +138,13 @@ pub fn explain_pixel(
                     // The verdict calls two surfaces tied when their
                     // depths differ by at most δ_a + δ_b (`Oracle::classify`);
                     // the other surface is not known here, so its δ is taken
-                    // equal to this one's (the window is ±2·tol), and tol
-                    // adds the error of the f32 query ray cast below,
-                    // γ(16)·t, to this footprint's δ.
-                    let tol = oracle.depth_tolerance(f) + f64::from(crate::math::gamma(16)) * t;
+                    // equal to this one's (the window is ±2·tol). The query
+                    // ray is the same f64 camera ray the oracle evaluates.
+                    let tol = oracle.depth_tolerance(f);
                     let mut tie = false;
-                    #[expect(clippy::cast_possible_truncation, reason = "a window for the f32 ray")]
-                    let window = Ray {
-                        t_min: (t - 2.0 * tol).max(0.0) as f32,
-                        t_max: (t + 2.0 * tol) as f32,
+                    let window = Ray64 {
+                        t_min: (t - 2.0 * tol).max(0.0),
+                        t_max: t + 2.0 * tol,
                         ..ray
                     };
                     accel.for_each_triangle_hit(&window, |other, _| {
@@ -157,7 +155,11 @@ pub fn explain_pixel(
                         best = best.min(Explanation::DepthTie);
                     }
                 }
-                if f.is_some_and(|f| f.edge_dist <= oracle.edge_px) {
+                if f.is_some_and(|f| {
+                    f.edge_dist
+                        <= crate::compare::Oracle::edge_tolerance(Some(&f), None)
+                            .min(crate::compare::oracle::EDGE_TIE_MAX_PX)
+                }) {
                     best = best.min(Explanation::Edge);
                 }
             }

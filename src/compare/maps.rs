@@ -43,11 +43,12 @@ pub fn class_color(c: Class) -> [u8; 3] {
         Class::EdgeTie => [60, 120, 255],
         Class::DepthTie => [40, 200, 80],
         Class::NearTie => [230, 80, 230],
+        Class::Unjudgeable => [255, 160, 0],
         Class::Real => [255, 30, 30],
     }
 }
 
-/// Per pixel, the worst class among its samples (real > near > depth > edge > agree).
+/// Per pixel, the worst class among its samples (real > unjudgeable > near > depth > edge > agree).
 #[must_use]
 pub fn visibility_map(cmp: &Comparison, width: u32, height: u32) -> Picture {
     let n = cmp.samples as usize;

@@ -24,17 +24,74 @@ pub use metrics::ImageStats;
 pub use oracle::{Class, Oracle};
 
 /// The derived tolerances of a comparison (DESIGN.md §6; derivations in
-/// ARCHITECTURE.md).
+/// ARCHITECTURE.md). The visibility tolerances are local (each sample's own,
+/// from its two triangles, in [`oracle`]); these are the limits a tie's
+/// tolerance may not exceed, and the scene-wide shading bound.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct Tolerances {
-    /// ε_edge in pixels.
-    pub edge_px: f64,
-    /// δ_near in view-depth units.
-    pub near_eps: f64,
+    /// The widest edge tie, in pixels ([`oracle::EDGE_TIE_MAX_PX`]).
+    pub edge_px_limit: f64,
+    /// The largest error part of a depth tie, relative to the depth
+    /// ([`oracle::DEPTH_ERROR_MAX_REL`]).
+    pub depth_rel_limit: f64,
+    /// The largest clip-plane error, relative to the plane's distance
+    /// ([`oracle::CLIP_ERROR_MAX_REL`]).
+    pub near_rel_limit: f64,
     /// ε_g.
     pub gate_eps: f64,
-    /// Largest shading error on agreeing samples.
+    /// Largest shading error on agreeing samples: 0, because both backends
+    /// shade a sample that sees the same triangle from bit-identical inputs
+    /// (the same weights from `TriScene::view_weights`, the same ray
+    /// direction, the same shadow queries) through one function.
     pub shading_max: f64,
+}
+
+/// A distribution of per-sample tolerances: its largest value and 99th
+/// percentile.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct Spread {
+    /// Largest value.
+    pub max: f64,
+    /// 99th percentile (nearest rank).
+    pub p99: f64,
+}
+
+impl Spread {
+    fn of(mut v: Vec<f64>, empty: f64) -> Spread {
+        if v.is_empty() {
+            return Spread {
+                max: empty,
+                p99: empty,
+            };
+        }
+        v.sort_by(f64::total_cmp);
+        #[expect(
+            clippy::cast_possible_truncation,
+            clippy::cast_sign_loss,
+            clippy::cast_precision_loss,
+            reason = "a rank below the length"
+        )]
+        let rank = ((0.99 * v.len() as f64).ceil() as usize).clamp(1, v.len()) - 1;
+        Spread {
+            max: v[v.len() - 1],
+            p99: v[rank],
+        }
+    }
+}
+
+/// The tolerances the oracle gave the samples it judged (every sample where
+/// the two frames saw different surfaces). With none judged, each spread is
+/// its smallest possible value (the snapping bound; 0).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct JudgedTolerances {
+    /// Samples judged.
+    pub judged: u64,
+    /// ε_edge (px).
+    pub edge_px: Spread,
+    /// δ_t relative to the depth (where both triangles were inside).
+    pub depth_rel: Spread,
+    /// δ_near (view-depth units).
+    pub near_eps: Spread,
 }
 
 /// Tolerances of image comparisons with POV-Ray or a regression image.
@@ -64,8 +121,11 @@ pub struct VisibilityCounts {
     pub edge_tie: u64,
     /// Depth ties.
     pub depth_tie: u64,
-    /// Near ties.
+    /// Near ties (at the near or far clip plane).
     pub near_tie: u64,
+    /// Samples that would be ties only with a tolerance wider than a tie
+    /// can be: not judged, and the verdict fails.
+    pub unjudgeable: u64,
     /// Real mismatches.
     pub real: u64,
 }
@@ -77,6 +137,7 @@ impl VisibilityCounts {
             Class::EdgeTie => self.edge_tie += 1,
             Class::DepthTie => self.depth_tie += 1,
             Class::NearTie => self.near_tie += 1,
+            Class::Unjudgeable => self.unjudgeable += 1,
             Class::Real => self.real += 1,
         }
     }
@@ -84,7 +145,7 @@ impl VisibilityCounts {
     /// All classes.
     #[must_use]
     pub fn total(&self) -> u64 {
-        self.agree + self.edge_tie + self.depth_tie + self.near_tie + self.real
+        self.agree + self.edge_tie + self.depth_tie + self.near_tie + self.unjudgeable + self.real
     }
 }
 
@@ -126,129 +187,32 @@ pub struct Comparison {
     pub grid: (u32, u32),
     /// Samples per pixel side.
     pub samples: u32,
+    /// The tolerances the judged samples were given (frames only).
+    pub judged: Option<JudgedTolerances>,
     /// Passed.
     pub pass: bool,
 }
+
+/// One sample's class, shading error, shading tie and (where the frames
+/// saw different surfaces) the tolerances it was judged with.
+type SampleVerdict = (Class, f32, bool, Option<oracle::Judged>);
 
 fn sample_error(a: Rgb, b: Rgb) -> f32 {
     a.clamp01().max_abs_diff(b.clamp01())
 }
 
-/// Derives the tolerances of a raster-vs-ray comparison for a scene.
-///
-/// * ε_edge = the snapping bound √2·2⁻⁹ px + the ray tracer's own error:
-///   γ(16) radians of direction (mapped to pixels with the camera's largest
-///   magnification) and γ(16)·(|eye|∞ + |bounds|∞) of position (the f32 ray
-///   origin and vertices), in pixels at the nearest view depth of the bounds.
-/// * δ_near = γ(16)·(|eye|∞ + |bounds|∞ + near): the absolute error of the
-///   ray parameter near the eye.
-/// * ε_g = [`crate::shade::GATE_EPS`].
-/// * shading_max = 2⁻²² · K + 2⁻¹⁸, with K a bound on |∂C/∂b| (see
-///   [`shading_lipschitz`]) and 2⁻¹⁸ the rounding of the shading arithmetic.
+/// The tolerances of a raster-vs-ray comparison (DESIGN.md §6): the limits
+/// of the local tolerances and the shading bound. The scene is not needed
+/// to derive them: nothing here depends on its bounds.
 #[must_use]
-pub fn derive_tolerances(scene: &TriScene) -> Tolerances {
-    use crate::camera::Projection;
-    let cam = &scene.camera;
-    let h = f64::from(cam.height());
-    // The ray tracer works in f32.
-    let g = f64::from(crate::math::gamma(16));
-    let b = scene.bounds;
-    let extent = f64::from(b.min.abs().max(b.max.abs()).max_element());
-    let eye = cam.eye().abs().max_element();
-    // The ray tracer's positions are f32: the eye (ray origin) and every
-    // vertex relative to it carry γ(16)·(|eye|∞ + |bounds|∞) of absolute
-    // error, which the screen magnifies most at the nearest view depth.
-    let position_error = g * (extent + eye);
-    let z_min = b
-        .corners()
-        .iter()
-        .map(|c| cam.view_depth(crate::math::to_f64(*c)))
-        .fold(f64::INFINITY, f64::min)
-        .max(cam.near());
-    let proj = match cam.projection() {
-        Projection::Perspective { tan_half_fov: t } => {
-            // Its directions carry γ(16) radians of error besides.
-            let a = cam.aspect();
-            let px_per_rad = h / (2.0 * t) * (1.0 + t * t * (1.0 + a * a));
-            g * px_per_rad + position_error * cam.max_pixels_per_unit(z_min)
-        }
-        Projection::Orthographic { view_height } => position_error * h / view_height,
-    };
+pub fn derive_tolerances(_scene: &TriScene) -> Tolerances {
     Tolerances {
-        edge_px: crate::coverage::SNAP_BOUND_PX + proj,
-        near_eps: g * (eye + extent + cam.near()),
+        edge_px_limit: oracle::EDGE_TIE_MAX_PX,
+        depth_rel_limit: oracle::DEPTH_ERROR_MAX_REL,
+        near_rel_limit: oracle::CLIP_ERROR_MAX_REL,
         gate_eps: f64::from(crate::shade::GATE_EPS),
-        shading_max: (-22f64).exp2() * shading_lipschitz(scene) + (-18f64).exp2(),
+        shading_max: 0.0,
     }
-}
-
-/// A bound K on |∂C/∂b_i| over the scene: the change of a sample's colour
-/// per unit change of a barycentric weight, for colours clamped to [0, 1].
-///
-/// Per material: the normal moves by at most `2/|Σ b n|` per unit of `b`
-/// (≤ 2·4 for the vertex normals of our meshes, taken as 8), which moves
-/// N·L and R·L by as much; the light terms then change by
-/// `Σ|Lc| (diffuse·max(1, brilliance) + phong·phong_size + specular/roughness)`
-/// per unit; a texture adds `max texel step (1) × size × |Δuv|max` per unit
-/// times the terms the pigment multiplies; the hit point moves by the
-/// triangle's edge length, which changes L by `|edge|/distance` (bounded by
-/// the same light factor).
-#[must_use]
-pub fn shading_lipschitz(scene: &TriScene) -> f64 {
-    let light_sum: f64 = scene
-        .lights
-        .iter()
-        .map(|l| f64::from(l.color.max_channel()))
-        .sum::<f64>()
-        .max(0.0);
-    let mut k: f64 = 0.0;
-    for (mi, m) in scene.materials.iter().enumerate() {
-        let terms = f64::from(m.diffuse) * f64::from(m.brilliance.max(1.0))
-            + f64::from(m.phong) * f64::from(m.phong_size)
-            + f64::from(m.specular) / f64::from(m.roughness);
-        let normal = 8.0 * light_sum * terms;
-        let tex = match &m.pigment {
-            crate::shade::Pigment::Image(t) => {
-                let uv = uv_spread(scene, mi);
-                f64::from(t.width().max(t.height()))
-                    * uv
-                    * (f64::from(m.ambient)
-                        + f64::from(m.emission)
-                        + f64::from(m.diffuse) * light_sum
-                        + 1.0)
-            }
-            crate::shade::Pigment::Color(_) => 0.0,
-        };
-        let bump = m.bump.as_ref().map_or(0.0, |bm| {
-            let uv = uv_spread(scene, mi);
-            f64::from(bm.texture.width().max(bm.texture.height())).powi(2)
-                * uv
-                * f64::from(bm.size.abs())
-                * light_sum
-                * terms
-        });
-        k = k.max(normal + tex + bump);
-    }
-    k
-}
-
-/// Largest |Δuv| along a triangle edge among the triangles of material `m`.
-fn uv_spread(scene: &TriScene, m: usize) -> f64 {
-    let mut spread: f64 = 0.0;
-    for (t, uvi) in scene.tri_uvs.iter().enumerate() {
-        if usize::from(scene.tri_material[t]) != m || uvi[0] == crate::tri_scene::NO_INDEX {
-            continue;
-        }
-        let uv = uvi.map(|i| scene.uvs[i as usize]);
-        for (a, b) in [(0, 1), (1, 2), (2, 0)] {
-            spread = spread.max(f64::from((uv[a] - uv[b]).abs().max_element()));
-        }
-    }
-    // Analytic spheres map the whole [0, 1] range.
-    if scene.analytic.iter().any(|s| usize::from(s.material) == m) {
-        spread = spread.max(1.0);
-    }
-    spread
 }
 
 /// `true` when bit `mask` differs between a sample and one of its 8
@@ -292,10 +256,10 @@ pub fn compare_frames(
         (b.width, b.height, b.samples),
         "frames differ in size"
     );
-    let oracle = Oracle::new(scene, tol.edge_px, tol.near_eps, depth);
+    let oracle = Oracle::new(scene, depth);
     let (sw, sh) = (a.sample_width(), a.sample_height());
     let cam = &scene.camera;
-    let per_row: Vec<Vec<(Class, f32, bool)>> = (0..sh)
+    let per_row: Vec<Vec<SampleVerdict>> = (0..sh)
         .into_par_iter()
         .map(|sy| {
             (0..sw)
@@ -303,15 +267,12 @@ pub fn compare_frames(
                     let i = (sy as usize) * (sw as usize) + sx as usize;
                     let (ia, ib) = (a.id[i], b.id[i]);
                     let opt = |id: u32| (id != BACKGROUND).then_some(id);
-                    let class = if ia == ib {
-                        Class::Agree
-                    } else {
+                    if ia != ib {
                         let (x, y) = cam.sample_point(sx, sy);
-                        oracle.classify(x, y, opt(ia), opt(ib))
-                    };
-                    if class != Class::Agree {
-                        return (class, f32::NAN, false);
+                        let j = oracle.judge(x, y, opt(ia), opt(ib));
+                        return (j.class, f32::NAN, false, Some(j));
                     }
+                    let class = Class::Agree;
                     let err = sample_error(a.sample_colors()[i], b.sample_colors()[i]);
                     let (fa, fb) = (a.flags[i], b.flags[i]);
                     let mut tie = (fa | fb) & FLAG_DISCONTINUITY != 0;
@@ -322,7 +283,7 @@ pub fn compare_frames(
                             on_boundary(a, sx, sy, mask) || on_boundary(b, sx, sy, mask)
                         });
                     }
-                    (class, err, tie)
+                    (class, err, tie, None)
                 })
                 .collect()
         })
@@ -333,8 +294,14 @@ pub fn compare_frames(
     let mut ties = Vec::with_capacity(classes.capacity());
     let (mut n, mut sum, mut sq, mut max, mut over) = (0u64, 0.0f64, 0.0f64, 0.0f64, 0u64);
     let (mut n_ties, mut tie_max) = (0u64, 0.0f64);
+    let (mut edges, mut depths, mut nears) = (Vec::new(), Vec::new(), Vec::new());
     for row in per_row {
-        for (class, err, tie) in row {
+        for (class, err, tie, judged) in row {
+            if let Some(j) = judged {
+                edges.push(j.edge_px);
+                nears.push(j.clip);
+                depths.extend(j.depth_rel);
+            }
             vis.add(class);
             classes.push(class);
             errors.push(err);
@@ -384,7 +351,13 @@ pub fn compare_frames(
         tie_max: Some(tie_max),
     };
     let image = metrics::image_stats(a.width, a.height, &a.color, &b.color);
-    let pass = vis.real == 0 && over == 0;
+    let pass = vis.real == 0 && vis.unjudgeable == 0 && over == 0;
+    let judged = JudgedTolerances {
+        judged: edges.len() as u64,
+        edge_px: Spread::of(edges, crate::coverage::SNAP_BOUND_PX),
+        depth_rel: Spread::of(depths, 0.0),
+        near_eps: Spread::of(nears, 0.0),
+    };
     Comparison {
         visibility: Some(vis),
         shading,
@@ -394,6 +367,7 @@ pub fn compare_frames(
         ties,
         grid: (sw, sh),
         samples: a.samples,
+        judged: Some(judged),
         pass,
     }
 }
@@ -465,6 +439,7 @@ pub fn compare_images(
         ties: Vec::new(),
         grid: (w, h),
         samples: 1,
+        judged: None,
         pass,
     }
 }

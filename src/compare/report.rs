@@ -6,13 +6,38 @@ use serde::Serialize;
 
 use super::{Comparison, ImageStats, ImageTolerances, ShadingStats, Tolerances, VisibilityCounts};
 
-/// The JSON `tolerance` object.
+/// The limits a tie's local tolerance may not exceed (derived constants).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct ToleranceLimits {
+    /// Widest edge tie (px).
+    pub edge_px: f64,
+    /// Largest error part of a depth tie, relative to the depth.
+    pub depth_rel: f64,
+    /// Largest clip-plane error, relative to the plane's distance.
+    pub near_rel: f64,
+}
+
+/// The JSON `tolerance` object. The visibility tolerances are per sample
+/// (DESIGN.md §6): their largest value and 99th percentile over the samples
+/// the oracle judged (null when one side is an image), beside the limits.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct ToleranceJson {
-    /// ε_edge (px).
-    pub edge_px: f64,
-    /// δ_near.
-    pub near_eps: f64,
+    /// ε_edge (px): the largest over the judged samples.
+    pub edge_px: Option<f64>,
+    /// ε_edge: 99th percentile.
+    pub edge_px_p99: Option<f64>,
+    /// δ_t relative to the depth: the largest.
+    pub depth_rel: Option<f64>,
+    /// δ_t relative to the depth: 99th percentile.
+    pub depth_rel_p99: Option<f64>,
+    /// δ_near (view-depth units): the largest.
+    pub near_eps: Option<f64>,
+    /// δ_near: 99th percentile.
+    pub near_eps_p99: Option<f64>,
+    /// Samples the oracle judged (the two sides saw different surfaces).
+    pub judged: Option<u64>,
+    /// The limits of the local tolerances.
+    pub limits: ToleranceLimits,
     /// ε_g.
     pub gate_eps: f64,
     /// Shading bound.
@@ -97,8 +122,18 @@ impl Report {
             shading: cmp.shading,
             image: cmp.image,
             tolerance: ToleranceJson {
-                edge_px: tol.edge_px,
-                near_eps: tol.near_eps,
+                edge_px: cmp.judged.map(|j| j.edge_px.max),
+                edge_px_p99: cmp.judged.map(|j| j.edge_px.p99),
+                depth_rel: cmp.judged.map(|j| j.depth_rel.max),
+                depth_rel_p99: cmp.judged.map(|j| j.depth_rel.p99),
+                near_eps: cmp.judged.map(|j| j.near_eps.max),
+                near_eps_p99: cmp.judged.map(|j| j.near_eps.p99),
+                judged: cmp.judged.map(|j| j.judged),
+                limits: ToleranceLimits {
+                    edge_px: tol.edge_px_limit,
+                    depth_rel: tol.depth_rel_limit,
+                    near_rel: tol.near_rel_limit,
+                },
                 gate_eps: tol.gate_eps,
                 shading_max: tol.shading_max,
                 pov_max8: image_tol.map(|t| t.pov_max8),
@@ -132,8 +167,8 @@ impl Report {
         if let Some(v) = &self.visibility {
             let _ = writeln!(
                 o,
-                "  visibility: {} agree, {} edge ties, {} depth ties, {} near ties, {} real",
-                v.agree, v.edge_tie, v.depth_tie, v.near_tie, v.real
+                "  visibility: {} agree, {} edge ties, {} depth ties, {} near ties, {} unjudgeable, {} real",
+                v.agree, v.edge_tie, v.depth_tie, v.near_tie, v.unjudgeable, v.real
             );
         }
         let s = &self.shading;
@@ -175,11 +210,16 @@ impl Report {
             );
         }
         let t = &self.tolerance;
-        let _ = write!(
-            o,
-            "  tolerance: edge {:.4} px, near {:.1e}, gate {:.1e}",
-            t.edge_px, t.near_eps, t.gate_eps
-        );
+        if let (Some(e), Some(d), Some(n), Some(j)) = (t.edge_px, t.depth_rel, t.near_eps, t.judged)
+        {
+            let _ = write!(
+                o,
+                "  tolerance ({j} samples judged): edge ≤ {e:.4} px (limit {:.4}), depth ≤ {d:.1e} of t (error limit {:.1e}), near ≤ {n:.1e}, gate {:.1e}",
+                t.limits.edge_px, t.limits.depth_rel, t.gate_eps
+            );
+        } else {
+            let _ = write!(o, "  tolerance: gate {:.1e}", t.gate_eps);
+        }
         if let (Some(m), Some(f)) = (t.pov_max8, t.pov_fraction) {
             let _ = write!(o, ", 8-bit ≤ {m} on ≥ {:.2}% of pixels", f * 100.0);
         }
@@ -211,8 +251,8 @@ impl Report {
         if let Some(v) = &self.visibility {
             let _ = writeln!(
                 o,
-                "visibility: agree {}, edge_tie {}, depth_tie {}, near_tie {}, real {}",
-                v.agree, v.edge_tie, v.depth_tie, v.near_tie, v.real
+                "visibility: agree {}, edge_tie {}, depth_tie {}, near_tie {}, unjudgeable {}, real {}",
+                v.agree, v.edge_tie, v.depth_tie, v.near_tie, v.unjudgeable, v.real
             );
         }
         let s = &self.shading;
@@ -294,7 +334,7 @@ pub fn scene_html(r: &Report, images: &[(&str, &str)]) -> String {
     }
     o.push_str("</div>\n<pre>");
     o.push_str(&esc(&r.summary()));
-    o.push_str("</pre>\n<p class=\"legend\">Visibility map: <span style=\"color:#3c78ff\">edge tie</span>, <span style=\"color:#28c850\">depth tie</span>, <span style=\"color:#e650e6\">near tie</span>, <span style=\"color:#ff1e1e\">real</span>. Heat map: black = equal, blue→cyan up to the tolerance, red→yellow above it, grey = shading tie, dark red = not compared (the two sides saw different surfaces there: see the visibility map).</p>\n</body></html>\n");
+    o.push_str("</pre>\n<p class=\"legend\">Visibility map: <span style=\"color:#3c78ff\">edge tie</span>, <span style=\"color:#28c850\">depth tie</span>, <span style=\"color:#e650e6\">near tie</span>, <span style=\"color:#ffa000\">unjudgeable</span>, <span style=\"color:#ff1e1e\">real</span>. Heat map: black = equal, blue→cyan up to the tolerance, red→yellow above it, grey = shading tie, dark red = not compared (the two sides saw different surfaces there: see the visibility map).</p>\n</body></html>\n");
     o
 }
 

@@ -14,7 +14,9 @@
 //!
 //! All PNGs are 16-bit linear (gAMA 1.0), at the scene's size: a scene with
 //! n×n samples is rendered at n·W × n·H without antialiasing and averaged
-//! over n×n blocks, which puts POV-Ray's rays on the same sample points.
+//! over n×n blocks, which puts POV-Ray's rays on the same sample points;
+//! each sample is clamped to [0, 1] before the mean (the PNG cannot store
+//! more), exactly as `Frame::resolve` does.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;

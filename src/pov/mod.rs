@@ -192,7 +192,7 @@ pub fn export(scene: &Scene, tri: &TriScene, opts: &ExportOptions) -> Export {
     if n > 1 {
         let _ = writeln!(
             o,
-            "// and average {n}x{n} blocks (the n×n samples of each pixel)."
+            "// and average {n}x{n} blocks (the n×n samples of each pixel, each clamped to [0, 1] first, as the PNG stores them)."
         );
     }
     let _ = writeln!(
@@ -264,24 +264,58 @@ pub fn export(scene: &Scene, tri: &TriScene, opts: &ExportOptions) -> Export {
     }
 
     let mut images: Vec<ImageRef> = Vec::new();
+    // The far plane clips what the camera sees (DESIGN.md §2), not what
+    // casts shadows or is reflected: an object it cuts is written twice,
+    // clipped for the camera only and whole for everything else.
+    let (f_dir, eye) = (cam.forward(), cam.eye());
+    let far_plane = format!(
+        "clipped_by {{ plane {{ {}, {} }} }}",
+        vec3(f_dir),
+        num(cam.far() + f_dir.dot(eye))
+    );
     for (k, obj) in scene.objects.iter().enumerate() {
         let m = &tri.materials[usize::from(obj.material)];
         let info = &tri.objects[k];
-        let _ = writeln!(o, "// {}", info.label);
+        let mut body = String::new();
         let uv = if is_primitive(obj, opts.geometry) {
-            write_primitive(&mut o, obj);
+            write_primitive(&mut body, obj);
             matches!(obj.shape, Shape::Sphere { .. })
         } else {
-            write_mesh2(&mut o, tri, k, opts.abridged)
+            write_mesh2(&mut body, tri, k, opts.abridged)
         };
-        write_texture(&mut o, scene, m, uv, &mut images);
+        write_texture(&mut body, scene, m, uv, &mut images);
         if m.is_transparent() && m.ior != 1.0 {
-            let _ = writeln!(o, "  interior {{ ior {} }}", f(m.ior));
+            let _ = writeln!(body, "  interior {{ ior {} }}", f(m.ior));
         }
         if obj.no_shadow {
-            let _ = writeln!(o, "  no_shadow");
+            let _ = writeln!(body, "  no_shadow");
         }
-        let _ = writeln!(o, "}}");
+        let depths: Vec<f64> = info
+            .bounds
+            .corners()
+            .iter()
+            .map(|c| cam.view_depth(to_f64(*c)))
+            .collect();
+        let deepest = depths.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let nearest = depths.iter().copied().fold(f64::INFINITY, f64::min);
+        let _ = writeln!(o, "// {}", info.label);
+        if deepest <= cam.far() {
+            let _ = writeln!(o, "{body}}}");
+            continue;
+        }
+        if nearest <= cam.far() {
+            let _ = writeln!(
+                o,
+                "{body}  {far_plane}\n  no_shadow no_reflection\n}}\n// {} beyond the far plane: shadows and reflections only",
+                info.label
+            );
+        } else {
+            let _ = writeln!(
+                o,
+                "// (wholly beyond the far plane: shadows and reflections only)"
+            );
+        }
+        let _ = writeln!(o, "{body}  no_image\n}}");
     }
     Export {
         text: o,

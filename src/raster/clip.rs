@@ -79,14 +79,17 @@ pub fn clip_polygon(poly: &[HVert], plane: &Plane, out: &mut Vec<HVert>) {
     }
 }
 
-/// The clip planes: the near plane `z ≥ near`, and the guard band
-/// `−g ≤ X ≤ width + g`, `−g ≤ Y ≤ height + g` (in homogeneous form,
-/// valid once `w > 0`).
+/// The clip planes: the near plane `z ≥ near`, the far plane `z ≤ far`,
+/// and the guard band `−g ≤ X ≤ width + g`, `−g ≤ Y ≤ height + g` (in
+/// homogeneous form, valid once `w > 0`).
 #[must_use]
-pub fn planes(near: f64, width: f64, height: f64, g: f64) -> [Plane; 5] {
+pub fn planes(near: f64, far: f64, width: f64, height: f64, g: f64) -> [Plane; 6] {
     [
         Plane {
             c: [0.0, 0.0, 0.0, 1.0, -near],
+        },
+        Plane {
+            c: [0.0, 0.0, 0.0, -1.0, far],
         },
         Plane {
             c: [1.0, 0.0, g, 0.0, 0.0],

@@ -35,7 +35,7 @@ use crate::camera::Projection;
 use crate::color::Rgb;
 use crate::coverage::{FillRule, SampleGrid, SnappedTri, Sub8, bbox_samples, doubled_area};
 use crate::frame::{BACKGROUND, Frame};
-use crate::math::{Bary, DVec3, to_f64};
+use crate::math::{DVec3, to_f64};
 use crate::options::{DepthFormat, ShadowMode};
 use crate::shade::{self, Unoccluded, Visibility};
 use crate::tri_scene::TriScene;
@@ -159,8 +159,6 @@ pub struct VisibilityBuffers {
     pub key: Vec<u32>,
     /// Triangle id per sample ([`BACKGROUND`] empty).
     pub id: Vec<u32>,
-    /// Barycentrics per sample (from the stepped planes).
-    pub bary: Vec<[f32; 3]>,
     /// Counters.
     pub stats: RasterStats,
 }
@@ -343,7 +341,6 @@ pub(crate) fn visibility_with(
     let total = (sw as usize) * (sh as usize);
     let mut key = vec![u32::MAX; total];
     let mut id = vec![BACKGROUND; total];
-    let mut bary = vec![[0.0f32; 3]; total];
     let depth_map = DepthMap {
         format: opts.depth,
         perspective,
@@ -354,9 +351,8 @@ pub(crate) fn visibility_with(
     let counters: Vec<(u64, u64)> = key
         .par_chunks_mut(band_len)
         .zip(id.par_chunks_mut(band_len))
-        .zip(bary.par_chunks_mut(band_len))
         .enumerate()
-        .map(|(b, ((key, id), bary))| {
+        .map(|(b, (key, id))| {
             let row0 = u32::try_from(b).unwrap_or(0) * BAND;
             let rows = row0..(row0 + BAND).min(sh);
             let mut writes = 0u64;
@@ -373,7 +369,7 @@ pub(crate) fn visibility_with(
                     perspective,
                     &depth_map,
                     overwrite,
-                    (key, id, bary),
+                    (key, id),
                 );
                 writes += w;
                 frags += f;
@@ -391,12 +387,7 @@ pub(crate) fn visibility_with(
         shadow_rays: 0,
         shadow_maps: 0,
     };
-    VisibilityBuffers {
-        key,
-        id,
-        bary,
-        stats,
-    }
+    VisibilityBuffers { key, id, stats }
 }
 
 fn setup_triangle(
@@ -409,21 +400,24 @@ fn setup_triangle(
     out: &mut Vec<Record>,
 ) -> bool {
     let near = -ctx.clip_planes[0].c[4];
+    let far = ctx.clip_planes[1].c[4];
     let guard_ok = |p: &(f64, f64)| p.0.abs() < GUARD_PX && p.1.abs() < GUARD_PX;
-    // The common case: in front of the near plane and inside the guard band.
-    if v.iter().all(|p| p.z >= near) {
+    // The common case: between the near and far planes and inside the
+    // guard band.
+    if v.iter().all(|p| p.z >= near && p.z <= far) {
         let s = [v[0].screen(), v[1].screen(), v[2].screen()];
         if s.iter().all(guard_ok) {
             return push_snapped(&s, tri, cull_back, ctx, out);
         }
     }
-    if v.iter().all(|p| p.z < near) {
+    if v.iter().all(|p| p.z < near) || v.iter().all(|p| p.z > far) {
         return false;
     }
     poly.clear();
     poly.extend_from_slice(v);
     for (k, plane) in ctx.clip_planes.iter().enumerate() {
-        if k > 0 && poly.iter().all(|p| guard_ok(&p.screen())) {
+        // Planes 0 and 1 are near and far; the guard band only where needed.
+        if k > 1 && poly.iter().all(|p| guard_ok(&p.screen())) {
             break;
         }
         clip_polygon(poly, plane, tmp);
@@ -594,20 +588,6 @@ fn walk_record(
     });
 }
 
-/// Normalised barycentrics from the stepped `λ`, rounded once to `f32`.
-#[inline]
-fn bary_of(l: &[f64; 3]) -> [f32; 3] {
-    let sum = l[0] + l[1] + l[2];
-    [l[0] / sum, l[1] / sum, l[2] / sum].map(|x| {
-        #[expect(
-            clippy::cast_possible_truncation,
-            reason = "one rounding of the f64 weights"
-        )]
-        let f = x as f32;
-        f
-    })
-}
-
 /// Scans one record over `rows` (a band): each covered sample takes the
 /// record's triangle if it passes the depth test (or always, with
 /// `overwrite`: the painter); returns (writes, fragments).
@@ -625,7 +605,7 @@ fn scan_record(
     perspective: bool,
     depth_map: &DepthMap,
     overwrite: bool,
-    (key, id, bary): (&mut [u32], &mut [u32], &mut [[f32; 3]]),
+    (key, id): (&mut [u32], &mut [u32]),
 ) -> (u64, u64) {
     let row0 = rows.start;
     let mut writes = 0u64;
@@ -638,14 +618,13 @@ fn scan_record(
         rows,
         sw,
         perspective,
-        |row, col, l, d, _| {
+        |row, col, _, d, _| {
             let i = ((row - row0) * sw + col) as usize;
             let k = depth_map.key(d);
             frags += 1;
             if overwrite || k < key[i] || (k == key[i] && r.tri < id[i]) {
                 key[i] = k;
                 id[i] = r.tri;
-                bary[i] = bary_of(l);
                 writes += 1;
             }
         },
@@ -655,7 +634,7 @@ fn scan_record(
 
 /// What triangle setup needs besides the triangle.
 struct SetupCtx<'g> {
-    clip_planes: [clip::Plane; 5],
+    clip_planes: [clip::Plane; 6],
     grid: &'g SampleGrid,
     /// Sample grid size.
     size: (u32, u32),
@@ -677,6 +656,7 @@ fn records(
     let ctx = SetupCtx {
         clip_planes: planes(
             cam.near(),
+            cam.far(),
             f64::from(cam.width()),
             f64::from(cam.height()),
             GUARD_PX,
@@ -849,13 +829,14 @@ fn shade_pass(
                 if tri == BACKGROUND {
                     continue;
                 }
-                let b = Bary(vis.bary[i]);
+                // The weights the ray tracer shades with: the f64 camera
+                // ray of this sample against the visible triangle.
+                let (x, y) = cam.sample_point(sx, sy);
+                let (o64, d64) = cam.primary_ray_f64(x, y);
+                let (b, p64) = scene.view_weights(tri, o64, d64);
                 let sp = scene.surface_at(tri, b);
-                let ray = cam.sample_ray(sx, sy);
+                let ray = cam.primary_ray(x, y);
                 let shaded = shade::shade(&ctx, &sp, ray.dir, visibility);
-                let v = scene.triangle_f64(tri);
-                let bf = b.0.map(f64::from);
-                let p64 = v[0] * bf[0] + v[1] * bf[1] + v[2] * bf[2];
                 let c = shaded.local;
                 let finite = |x: f32| if x.is_finite() { x } else { 0.0 };
                 color[sx as usize] = Rgb::new(finite(c.r), finite(c.g), finite(c.b));

@@ -70,7 +70,7 @@ impl DepthMap {
     fn render(&mut self, scene: &TriScene, casters: &[u32], near: f64) {
         let res = self.res;
         let grid = SampleGrid::new(1);
-        let clip = planes(near, f64::from(res), f64::from(res), 65_536.0);
+        let clip = planes(near, f64::MAX, f64::from(res), f64::from(res), 65_536.0);
         let perspective = self.perspective;
         let mut poly = Vec::with_capacity(8);
         let mut tmp = Vec::with_capacity(8);

@@ -390,6 +390,18 @@ fn check_nonneg_rgb(t: &Table<'_, '_>, key: &'static str, v: &At<DVec3>) -> Resu
 /// stay below f32::MAX = 3.4e38 (DESIGN.md §8).
 pub const MAX_COORDINATE: f64 = 1e12;
 
+/// Texture coordinates must lie within ±1e6: f32 resolves 1e6 to 1/16, so
+/// beyond it neighbouring texture lookups would be a sixteenth of a whole
+/// repeat apart (every texel of a 16×16 image at once); an image pigment
+/// cannot be rendered meaningfully there.
+pub const MAX_UV: f64 = 1e6;
+
+/// `bump.size` must lie within ±1e6: a one-code height step (1/255) then
+/// tilts the normal by at most 4000 times its own length, still a
+/// direction f32 can carry next to the unit normal; POV-Ray's `bump_size`
+/// is rarely beyond 10.
+pub const MAX_BUMP_SIZE: f64 = 1e6;
+
 fn check_coord(t: &Table<'_, '_>, key: &'static str, v: &At<DVec3>) -> Result<(), LoadError> {
     if v.value.abs().max_element() > MAX_COORDINATE {
         return Err(t.err(
@@ -936,7 +948,17 @@ impl Loader {
             let file = bt.req_string("image")?;
             let size = match bt.f64("size")? {
                 Some(s) => {
-                    #[expect(clippy::cast_possible_truncation, reason = "finite bump size")]
+                    if s.value.abs() > MAX_BUMP_SIZE {
+                        return Err(bt.err(
+                            &s.span,
+                            "size",
+                            format!(
+                                "expected a bump size within ±{MAX_BUMP_SIZE:e}, got {}",
+                                num(s.value)
+                            ),
+                        ));
+                    }
+                    #[expect(clippy::cast_possible_truncation, reason = "bounded bump size")]
                     let v = s.value as f32;
                     v
                 }
@@ -1276,10 +1298,20 @@ impl Loader {
             Some((uarr, _)) => {
                 let mut uv = Vec::new();
                 for (k, item) in uarr.iter().enumerate() {
-                    uv.push(
-                        reader::floats_of::<2>(item)
-                            .map_err(|m| t.err(&item.span(), &format!("uv[{k}]"), m))?,
-                    );
+                    let pair = reader::floats_of::<2>(item)
+                        .map_err(|m| t.err(&item.span(), &format!("uv[{k}]"), m))?;
+                    if pair.iter().any(|c| c.abs() > MAX_UV) {
+                        return Err(t.err(
+                            &item.span(),
+                            &format!("uv[{k}]"),
+                            format!(
+                                "texture coordinates must lie within ±{MAX_UV:e} (f32 resolves larger ones to a sixteenth of a repeat or worse), got [{}, {}]",
+                                num(pair[0]),
+                                num(pair[1])
+                            ),
+                        ));
+                    }
+                    uv.push(pair);
                 }
                 Some(uv)
             }

@@ -141,6 +141,21 @@ fn check(path: &Path, text: &str) -> Result<Vec<FaceInfo>, LoadError> {
             }
             "vt" => {
                 numbers(2, 3, "u v [w]")?;
+                if let Some(a) = args
+                    .iter()
+                    .take(2)
+                    .find(|a| parse_f32(a).is_ok_and(|v| f64::from(v.abs()) > super::MAX_UV))
+                {
+                    return Err(mesh_err(
+                        path,
+                        line,
+                        format!(
+                            "texture coordinate `{}` is beyond ±{:e} (f32 resolves it to a sixteenth of a repeat or worse)",
+                            shown(a),
+                            super::MAX_UV
+                        ),
+                    ));
+                }
                 nvt += 1;
             }
             "vn" => {

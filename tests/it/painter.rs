@@ -70,7 +70,8 @@ fn a_cyclic_overlap_defeats_every_order_and_is_found() {
 /// Scenes without interpenetrating surfaces or cyclic overlaps: the
 /// painter with Newell's order sees exactly what the z-buffer sees.
 /// (`dense` and `teapot` have open meshes whose pieces pass through each
-/// other: 11 and 105 wrongly ordered samples, counted as such.)
+/// other, and `inside` 65 pairs Newell's tests leave undecided: wrongly
+/// ordered samples, counted in `undecided_pairs_misorder_what_they_cover`.)
 #[test]
 fn without_cycles_the_painter_agrees_with_the_zbuffer() {
     for name in [
@@ -78,7 +79,6 @@ fn without_cycles_the_painter_agrees_with_the_zbuffer() {
         "bunny",
         "glass",
         "grazing",
-        "inside",
         "menagerie",
         "near_plane",
         "painter_floor",
@@ -91,6 +91,28 @@ fn without_cycles_the_painter_agrees_with_the_zbuffer() {
         assert_eq!(wrong, 0, "{name}: {stats:?}");
         assert_eq!(shading, 0.0, "{name}");
     }
+}
+
+/// Where Newell's tests leave pairs undecided (interpenetrating pieces of
+/// a mesh), the painter's order is wrong somewhere, and the verdict finds
+/// every such sample as real: the counts are snapshotted. (With the
+/// verdict's earlier scene-wide edge tolerance, `inside`'s one wrongly
+/// ordered sample, 0.043 px inside its triangles' edges, passed as an
+/// edge tie.)
+#[test]
+fn undecided_pairs_misorder_what_they_cover() {
+    let mut text = String::new();
+    for name in ["dense", "inside", "teapot"] {
+        let (wrong, stats, shading) = against_zbuffer(name, PainterSort::Newell);
+        assert!(stats.undecided > 0, "{name}: {stats:?}");
+        assert!(wrong > 0, "{name}: undecided pairs but no wrong sample");
+        assert_eq!(shading, 0.0, "{name}");
+        text.push_str(&format!(
+            "{name}: {wrong} wrongly ordered samples, {} undecided pairs\n",
+            stats.undecided
+        ));
+    }
+    insta::assert_snapshot!("painter_undecided_pairs", text);
 }
 
 /// The anti-aliased picture: the same order painted with tiny-skia, one

@@ -4,8 +4,8 @@
 //! each skip fires on a scene built for it, as the backends' own counters
 //! show.
 
+use rendiff::compare::Oracle;
 use rendiff::compare::oracle::Class;
-use rendiff::compare::{Oracle, derive_tolerances};
 use rendiff::frame::{BACKGROUND, Frame};
 use rendiff::options::ShadowMode;
 use rendiff::scene::Scene;
@@ -73,8 +73,7 @@ fn the_plan_never_changes_a_pixel() {
             // The one exception: the unplanned rasterizer shows a back face
             // that the plan culls. Each such sample is an edge or depth tie.
             let tri = &planned.tri;
-            let tol = derive_tolerances(tri);
-            let oracle = Oracle::new(tri, tol.edge_px, tol.near_eps, planned.settings.depth);
+            let oracle = Oracle::new(tri, planned.settings.depth);
             let cam = &tri.camera;
             let sw = cam.sample_width() as usize;
             let mut ties = 0;

@@ -5,8 +5,8 @@
 
 use rendiff::accel::{Accel, AccelOptions};
 use rendiff::color::to_srgb8;
+use rendiff::compare::Oracle;
 use rendiff::compare::explain::{Explained, explain};
-use rendiff::compare::{Oracle, derive_tolerances};
 use rendiff::image_io::read_png_linear;
 use rendiff::options::Geometry;
 use rendiff::pov::golden::{self, Variant};
@@ -134,9 +134,8 @@ fn against(
         _ => job.render_with_depth(backend, depth).frame,
     };
     let (frac, max8) = within(&frame.color, &reference.pixels);
-    let tol = derive_tolerances(&job.tri);
     let accel = Accel::new(&job.tri, AccelOptions::default());
-    let oracle = Oracle::new(&job.tri, tol.edge_px, tol.near_eps, job.settings.depth);
+    let oracle = Oracle::new(&job.tri, job.settings.depth);
     let (explained, _) = explain(&frame, &reference.pixels, &accel, &oracle, MAX8);
     (frac, max8, explained)
 }

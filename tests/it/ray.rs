@@ -4,9 +4,9 @@
 
 use rendiff::accel::{Accel, AccelOptions, ShadowRays};
 use rendiff::camera::{Camera, Projection};
-use rendiff::compare::{Class, Oracle, derive_tolerances};
+use rendiff::compare::{Class, Oracle};
 use rendiff::frame::BACKGROUND;
-use rendiff::math::{DVec3, Ray, Vec3, to_f32, to_f64};
+use rendiff::math::{DVec3, Ray, Ray64, Vec3, to_f32, to_f64};
 use rendiff::options::{DepthFormat, Geometry};
 use rendiff::scene::Scene;
 use rendiff::shade::Visibility;
@@ -106,7 +106,10 @@ fn assert_bvh_matches_brute_force(t: &TriScene, rays: usize, seed: u64) {
             t_min: 0.0,
             t_max: f32::INFINITY,
         };
-        let (x, y) = (bvh.intersect(&ray), flat.intersect(&ray));
+        let (x, y) = (
+            bvh.intersect(&Ray64::from(&ray)),
+            flat.intersect(&Ray64::from(&ray)),
+        );
         assert_eq!(
             x.map(|h| (h.prim, h.t.to_bits())),
             y.map(|h| (h.prim, h.t.to_bits())),
@@ -189,7 +192,7 @@ fn crossings(accel: &Accel<'_>, p: Vec3, dir: Vec3) -> usize {
         t_max: f32::INFINITY,
     };
     let mut n = 0;
-    while let Some(h) = accel.intersect(&ray) {
+    while let Some(h) = accel.intersect(&Ray64::from(&ray)) {
         n += 1;
         ray.t_min = h.t * (1.0 + 8.0 * f32::EPSILON) + f32::MIN_POSITIVE;
         assert!(n < 10_000, "runaway crossing count");
@@ -261,7 +264,7 @@ fn watertight_rays_at_vertices_and_edges_never_miss() {
                 t_min: 0.0,
                 t_max: f32::INFINITY,
             };
-            if accel.intersect(&ray).is_none() {
+            if accel.intersect(&Ray64::from(&ray)).is_none() {
                 misses += 1;
             }
             total += 1;
@@ -300,7 +303,7 @@ fn rays_from_inside_a_closed_mesh_always_hit() {
                 t_max: f32::INFINITY,
             };
             assert!(
-                accel.intersect(&ray).is_some(),
+                accel.intersect(&Ray64::from(&ray)).is_some(),
                 "{}: a ray from inside escaped",
                 o.label
             );
@@ -334,7 +337,6 @@ fn visibility_is_the_same_at_any_scale() {
             let f = job.render(Backend::Ray).frame;
             // Visibility: every differing id is explained (no real mismatch)
             // by the oracle of the scaled scene.
-            let tol = derive_tolerances(&job.tri);
             let cam = &job.tri.camera;
             // Across scenes the triangles differ by the f32 rounding of the
             // scaled and moved vertices (≤ ½ ulp of the largest coordinate);
@@ -350,12 +352,7 @@ fn visibility_is_the_same_at_any_scale() {
                 .fold(f64::INFINITY, f64::min)
                 .max(cam.near());
             let quantization_px = ulp * cam.max_pixels_per_unit(z_min);
-            let oracle = Oracle::new(
-                &job.tri,
-                tol.edge_px + quantization_px,
-                tol.near_eps,
-                DepthFormat::F32,
-            );
+            let oracle = Oracle::new(&job.tri, DepthFormat::F32).with_vertex_error(quantization_px);
             let mut real = 0;
             let mut differ = 0;
             for (i, (&a, &b)) in fb.id.iter().zip(&f.id).enumerate() {

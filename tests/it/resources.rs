@@ -38,8 +38,7 @@ fn memory_per_triangle_and_per_sample_is_within_the_budgeted_figures() {
             + std::mem::size_of_val(frame.flags.as_slice())
             + std::mem::size_of_val(frame.sample_colors())
             + std::mem::size_of_val(vis.key.as_slice())
-            + std::mem::size_of_val(vis.id.as_slice())
-            + std::mem::size_of_val(vis.bary.as_slice());
+            + std::mem::size_of_val(vis.id.as_slice());
         let per_sample = sample_bytes as f64 / samples as f64;
         eprintln!("{name:8} {per_sample:.1} B/sample ({samples} samples)");
         assert!(

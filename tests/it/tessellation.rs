@@ -4,7 +4,7 @@
 use std::collections::HashMap;
 
 use rendiff::accel::{Accel, AccelOptions};
-use rendiff::math::{DVec3, Ray, Vec3, to_f64};
+use rendiff::math::{DVec3, Ray, Ray64, Vec3, to_f64};
 use rendiff::scene::Scene;
 use rendiff::tessellate::{TessOptions, is_closed, tessellate};
 use rendiff::tri_scene::TriScene;
@@ -82,7 +82,7 @@ fn max_radial_error(t: &TriScene, center: DVec3, radial: impl Fn(DVec3) -> f64) 
             t_max: f32::INFINITY,
         };
         let hit = accel
-            .intersect(&ray)
+            .intersect(&Ray64::from(&ray))
             .expect("a ray from inside a closed mesh hits it");
         worst = worst.max((radial(d) - f64::from(hit.t)).abs());
     }
