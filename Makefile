@@ -18,15 +18,18 @@ lint:
 unit:
 	$(CARGO) test
 
-## Re-render the POV-Ray references of the bundled scenes (golden/pov).
+## Re-render the POV-Ray references of the bundled scenes (golden/pov)
+## and of the hazard scenes (tests/data/hazards/golden).
+HAZARDS = tests/data/hazards/*.toml --golden tests/data/hazards/golden
 golden:
 	$(CARGO) run --release -- golden --update
+	$(CARGO) run --release -- golden --update $(HAZARDS)
 
 ## Check mode: re-render into a temporary folder and compare bit for bit.
 ## Skipped without POV-Ray unless RENDIFF_REQUIRE_POVRAY=1 (as in CI).
 golden-check:
 	@if command -v povray >/dev/null 2>&1; then \
-		$(CARGO) run -q -- golden; \
+		$(CARGO) run -q -- golden && $(CARGO) run -q -- golden $(HAZARDS); \
 	elif [ "$${RENDIFF_REQUIRE_POVRAY:-0}" = 1 ]; then \
 		echo "golden-check: povray is required but not installed" >&2; exit 1; \
 	else \

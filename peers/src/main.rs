@@ -30,7 +30,7 @@ use anyhow::{Context, Result, bail};
 use rayon::prelude::*;
 use rendiff::accel::{Accel, AccelOptions};
 use rendiff::color::to_srgb8;
-use rendiff::math::Ray;
+use rendiff::math::{Ray64, to_f32};
 use rendiff::pov::golden::{self, Variant};
 use rendiff::{Backend, Overrides, Prepared};
 
@@ -117,9 +117,11 @@ fn embree_cmp(scene: &Path, subdivide: u32, repeats: usize) -> Result<()> {
     let job = Prepared::load(scene, &Overrides::default())?;
     let tri = job.tri.subdivided(subdivide);
     let cam = &tri.camera;
-    let rays: Vec<Ray> = (0..cam.sample_height())
+    // The camera's f64 rays: ours decides on them, Embree gets their f32
+    // rounding (the same rays, as each takes them).
+    let rays: Vec<Ray64> = (0..cam.sample_height())
         .flat_map(|sy| (0..cam.sample_width()).map(move |sx| (sx, sy)))
-        .map(|(sx, sy)| cam.sample_ray(sx, sy))
+        .map(|(sx, sy)| cam.sample_ray64(sx, sy))
         .collect();
     println!(
         "{}: {} triangles, {}x{}, {} primary rays",
@@ -159,7 +161,7 @@ fn embree_cmp(scene: &Path, subdivide: u32, repeats: usize) -> Result<()> {
         );
         let accel = Accel::new(&tri, AccelOptions::default());
         let emb = embree::EmbreeScene::new(&positions, &tri.tris, &config)?;
-        let time = |f: &(dyn Fn(&Ray) -> Option<(u32, f32)> + Sync)| -> f64 {
+        let time = |f: &(dyn Fn(&Ray64) -> Option<(u32, f32)> + Sync)| -> f64 {
             median(
                 (0..repeats)
                     .map(|_| {
@@ -176,9 +178,16 @@ fn embree_cmp(scene: &Path, subdivide: u32, repeats: usize) -> Result<()> {
                     .collect(),
             )
         };
-        let ours = |r: &Ray| accel.intersect(r).map(|h| (h.prim, h.t));
-        let theirs =
-            |r: &Ray| emb.intersect(r.origin.to_array(), r.dir.to_array(), r.t_min, r.t_max);
+        let ours = |r: &Ray64| accel.intersect(r).map(|h| (h.prim, h.t));
+        #[expect(clippy::cast_possible_truncation, reason = "Embree takes f32 rays")]
+        let theirs = |r: &Ray64| {
+            emb.intersect(
+                to_f32(r.origin).to_array(),
+                to_f32(r.dir).to_array(),
+                r.t_min as f32,
+                r.t_max as f32,
+            )
+        };
         let t_ours = time(&ours);
         let t_emb = time(&theirs);
         let mrays = |ms: f64| rays.len() as f64 / ms / 1e3;

@@ -296,29 +296,33 @@ impl<'a, 's> ShadowRays<'a, 's> {
 }
 
 /// The shadow ray of a query: to a point light, the `f64` segment from the
-/// origin to the light itself; to a parallel light, the query's `f32` ray.
-fn shadow_ray(scene: &TriScene, q: &ShadowQuery) -> Ray64 {
+/// origin to the light itself, and the light's position; to a parallel
+/// light, the query's `f32` ray.
+fn shadow_ray(scene: &TriScene, q: &ShadowQuery) -> (Ray64, Option<DVec3>) {
     let o = to_f64(q.origin);
     if let Some(light) = scene.lights.get(q.light)
         && let crate::shade::LightKind::Point { position } = light.kind
     {
-        let v = to_f64(position) - o;
+        let at = to_f64(position);
+        let v = at - o;
         let len = v.length();
         if len > 0.0 && len.is_finite() {
-            return Ray64 {
+            let ray = Ray64 {
                 origin: o,
                 dir: v / len,
                 t_min: 0.0,
                 t_max: len,
             };
+            return (ray, Some(at));
         }
     }
-    Ray64 {
+    let ray = Ray64 {
         origin: o,
         dir: to_f64(q.dir),
         t_min: 0.0,
         t_max: f64::from(q.t_max),
-    }
+    };
+    (ray, None)
 }
 
 /// `true` when triangle `tri`'s plane passes through `light` up to the
@@ -360,17 +364,14 @@ impl Visibility for ShadowRays<'_, '_> {
         }
         self.cast.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         let scene = a.scene;
-        let ray = shadow_ray(scene, q);
-        let light = ray.at(ray.t_max);
+        let (ray, light) = shadow_ray(scene, q);
         // Every crossing: (t, id, barycentrics); an opaque one ends it. A
         // surface through the light itself is not an occluder.
         let mut crossings: Vec<(f64, u32, [f32; 3])> = Vec::new();
         let mut blocked = false;
         a.bvh.for_each_hit(&ray, |id, h| {
             let class = a.class[id as usize];
-            if class == ShadowClass::None
-                || (ray.t_max.is_finite() && plane_through(scene, id, light))
-            {
+            if class == ShadowClass::None || light.is_some_and(|l| plane_through(scene, id, l)) {
                 return false;
             }
             if class == ShadowClass::Opaque {

@@ -19,6 +19,8 @@ mod differential;
 mod fuzz_corpus;
 /// Regression images per backend (golden/raster, golden/ray).
 mod golden;
+/// The hazard scenes and the ray families behind them.
+mod hazards;
 /// Hidden lines: Appel's QI against ray counts and the z-buffer.
 mod lines;
 /// The painter's algorithm against the z-buffer.
