@@ -230,7 +230,7 @@ fn produce(job: &Prepared, side: &Side, max_depth: u32) -> Result<(Output, Optio
             }
         }
         Side::Backend(b) => {
-            let r = job.render_with_depth(*b, max_depth);
+            let r = job.render_with_depth(*b, max_depth)?;
             let note = match r.work {
                 crate::Work::Painter { order: o, .. } => Some(format!(
                     "painter ({} sort): {} triangles drawn; {} overlapping pairs ordered: {} by depth ranges, {} by planes, {} coplanar; {} undecided (interpenetrating or cyclic), {} cycles broken; its real mismatches are samples it ordered wrongly",

@@ -23,6 +23,22 @@ pub fn read_file(path: &Path) -> io::Result<Vec<u8>> {
     std::fs::read(path)
 }
 
+/// The size of a regular file, without opening it.
+///
+/// # Errors
+///
+/// As [`read_file`] for what is not a regular file.
+pub fn regular_file_size(path: &Path) -> io::Result<u64> {
+    let m = std::fs::metadata(path)?;
+    if !m.is_file() {
+        return Err(io::Error::new(
+            io::ErrorKind::InvalidInput,
+            "not a regular file (a directory, a device or a pipe)",
+        ));
+    }
+    Ok(m.len())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

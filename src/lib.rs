@@ -27,6 +27,7 @@
 pub mod accel;
 pub mod analytic;
 pub mod bench;
+pub mod budget;
 pub mod camera;
 pub mod color;
 pub mod compare;
@@ -163,6 +164,9 @@ pub enum Error {
     /// A request that cannot be carried out as given.
     #[error("{0}")]
     Usage(String),
+    /// A render would need more memory than its budget.
+    #[error(transparent)]
+    Budget(#[from] budget::OverBudget),
 }
 
 pub use shade::GATE_EPS;
@@ -178,6 +182,9 @@ pub struct Prepared {
     pub settings: Settings,
     /// The plan (or everything on).
     pub plan: Plan,
+    /// The request's memory budget, with what loading and tessellating
+    /// reserved (rendering reserves its own large buffers in it too).
+    pub budget: std::sync::Arc<budget::Budget>,
 }
 
 /// A rendered frame and what it cost.
@@ -220,16 +227,39 @@ impl Prepared {
     ///
     /// [`Error::Load`] for a bad scene, [`Error::Usage`] for bad overrides.
     pub fn load(path: &Path, ov: &Overrides) -> Result<Prepared, Error> {
-        let scene = Scene::load(path)?;
-        Prepared::from_scene(scene, ov)
+        let budget = std::sync::Arc::new(budget::Budget::new(
+            ov.memory_budget.unwrap_or(budget::DEFAULT_MEMORY_BUDGET),
+        ));
+        let scene = Scene::load_within(path, &budget)?;
+        Prepared::from_scene_within(scene, ov, budget)
     }
 
-    /// Prepares an already loaded scene.
+    /// Prepares an already loaded scene (its meshes and textures counted
+    /// into a fresh budget).
     ///
     /// # Errors
     ///
     /// As [`Prepared::load`].
     pub fn from_scene(scene: Scene, ov: &Overrides) -> Result<Prepared, Error> {
+        let budget = std::sync::Arc::new(budget::Budget::new(
+            ov.memory_budget.unwrap_or(budget::DEFAULT_MEMORY_BUDGET),
+        ));
+        budget.reserve(scene.data_bytes(), || {
+            "the scene's meshes and textures".to_string()
+        })?;
+        Prepared::from_scene_within(scene, ov, budget)
+    }
+
+    /// Prepares a scene loaded within `budget`.
+    ///
+    /// # Errors
+    ///
+    /// As [`Prepared::load`].
+    pub fn from_scene_within(
+        scene: Scene,
+        ov: &Overrides,
+        budget: std::sync::Arc<budget::Budget>,
+    ) -> Result<Prepared, Error> {
         if let Some((w, h)) = ov.size {
             let max = scene::MAX_IMAGE_SIDE;
             if w == 0 || h == 0 || w > max || h > max {
@@ -250,13 +280,14 @@ impl Prepared {
         {
             return Err(Error::Usage(format!("--max-depth {d}: expected 1 … 64")));
         }
-        let tri = tessellate::tessellate(
+        let tri = tessellate::tessellate_within(
             &scene,
             &TessOptions {
                 size: ov.size,
                 samples: ov.samples,
                 memory_budget: ov.memory_budget,
             },
+            &budget,
         )?;
         let settings = Settings {
             depth: ov.depth.unwrap_or(scene.raster.depth),
@@ -275,11 +306,29 @@ impl Prepared {
         } else {
             Plan::everything(&tri, settings.bvh)
         };
+        // Shadow maps: a cube of six f32 maps per point light, one map per
+        // parallel light, RES² texels of 4 B each.
+        if let ShadowMode::Map(res) = settings.shadows
+            && plan.shadows
+        {
+            let maps: u64 = tri
+                .lights
+                .iter()
+                .filter(|l| !l.shadowless)
+                .map(|l| match l.kind {
+                    shade::LightKind::Point { .. } => 6,
+                    shade::LightKind::Parallel { .. } => 1,
+                })
+                .sum();
+            let bytes = maps * u64::from(res) * u64::from(res) * 4;
+            budget.reserve(bytes, || format!("{maps} shadow map(s) of {res}x{res}"))?;
+        }
         Ok(Prepared {
             scene,
             tri,
             settings,
             plan,
+            budget,
         })
     }
 
@@ -298,14 +347,21 @@ impl Prepared {
     }
 
     /// Renders with a backend.
-    #[must_use]
-    pub fn render(&self, backend: Backend) -> Rendered {
+    ///
+    /// # Errors
+    ///
+    /// [`Error::Budget`] when the render's own buffers (the painter's pair
+    /// lists) would not fit the budget.
+    pub fn render(&self, backend: Backend) -> Result<Rendered, Error> {
         self.render_with_depth(backend, self.settings.max_depth)
     }
 
     /// Renders with a backend and a given ray-tree depth.
-    #[must_use]
-    pub fn render_with_depth(&self, backend: Backend, max_depth: u32) -> Rendered {
+    ///
+    /// # Errors
+    ///
+    /// As [`Prepared::render`].
+    pub fn render_with_depth(&self, backend: Backend, max_depth: u32) -> Result<Rendered, Error> {
         let start = Instant::now();
         let (frame, work) = match backend {
             Backend::Raster => {
@@ -317,7 +373,8 @@ impl Prepared {
                     &self.tri,
                     &self.raster_options(),
                     self.settings.painter_sort,
-                );
+                    &self.budget,
+                )?;
                 (frame, Work::Painter { raster, order })
             }
             Backend::Ray => {
@@ -346,10 +403,10 @@ impl Prepared {
                 )
             }
         };
-        Rendered {
+        Ok(Rendered {
             frame,
             time_ms: start.elapsed().as_secs_f64() * 1e3,
             work,
-        }
+        })
     }
 }

@@ -67,40 +67,41 @@ pub const BYTES_PER_SAMPLE: u64 = 48;
 /// PNG encoder's buffers (≤ 8 B), rounded up.
 pub const BYTES_PER_PIXEL: u64 = 24;
 
-/// The default memory budget of one render: 4 GiB.
-pub const DEFAULT_MEMORY_BUDGET: u64 = 4 << 30;
+pub use crate::budget::DEFAULT_MEMORY_BUDGET;
 
-/// The memory a scene will need, counted before anything large is
-/// allocated, against the budget.
-struct Budget {
-    limit: u64,
-    image: u64,
+/// The memory a scene's triangles and frames will need, counted before
+/// anything large is allocated, into the request's budget.
+struct Budget<'b> {
+    shared: &'b crate::budget::Budget,
     samples: u64,
     triangles: u64,
 }
 
-impl Budget {
+impl Budget<'_> {
+    /// Reserves `bytes` for the frames of the image.
+    fn image(&mut self, bytes: u64, scene: &Scene, what: &str) -> Result<(), LoadError> {
+        self.shared
+            .reserve(bytes, || what.to_string())
+            .map_err(|e| LoadError::Scene {
+                path: scene.path.clone(),
+                message: format!("{e} (lower the image size or the samples)"),
+            })
+    }
+
     /// Adds `tris` triangles, or says why they do not fit.
     fn add(&mut self, tris: u64, scene: &Scene, what: &str) -> Result<(), LoadError> {
         self.triangles = self.triangles.saturating_add(tris);
-        let need = self
-            .triangles
-            .saturating_mul(BYTES_PER_TRIANGLE)
-            .saturating_add(self.image);
-        if need > self.limit {
-            let gib = |b: u64| b as f64 / f64::from(1u32 << 30);
-            return Err(LoadError::Scene {
+        let (triangles, samples) = (self.triangles, self.samples);
+        self.shared
+            .reserve(tris.saturating_mul(BYTES_PER_TRIANGLE), || {
+                format!(
+                    "{what} ({triangles} triangles in all at {BYTES_PER_TRIANGLE} B, beside {samples} samples at {BYTES_PER_SAMPLE} B)"
+                )
+            })
+            .map_err(|e| LoadError::Scene {
                 path: scene.path.clone(),
-                message: format!(
-                    "{what} would need about {:.2} GiB ({} triangles at {BYTES_PER_TRIANGLE} B, {} samples at {BYTES_PER_SAMPLE} B), over the memory budget of {:.2} GiB: lower the tessellation, the image size or the samples, or raise --memory-budget",
-                    gib(need),
-                    self.triangles,
-                    self.samples,
-                    gib(self.limit)
-                ),
-            });
-        }
-        Ok(())
+                message: format!("{e} (lower the tessellation, the image size or the samples)"),
+            })
     }
 }
 
@@ -611,6 +612,21 @@ fn choose_segments(fixed: Option<u32>, tolerance: f64, error: impl Fn(u32) -> f6
 /// supported range after transforms, or a refracting material on an
 /// object that is not closed.
 pub fn tessellate(scene: &Scene, opts: &TessOptions) -> Result<TriScene, LoadError> {
+    let budget = crate::budget::Budget::new(opts.memory_budget.unwrap_or(DEFAULT_MEMORY_BUDGET));
+    tessellate_within(scene, opts, &budget)
+}
+
+/// [`tessellate`] counting into a request's budget (what its scene,
+/// meshes and textures already hold is in it).
+///
+/// # Errors
+///
+/// As [`tessellate`].
+pub fn tessellate_within(
+    scene: &Scene,
+    opts: &TessOptions,
+    shared: &crate::budget::Budget,
+) -> Result<TriScene, LoadError> {
     let camera = scene_camera(scene, opts)?;
     let err_px = scene.render.tessellation_error;
     let mut out = TriScene {
@@ -640,14 +656,19 @@ pub fn tessellate(scene: &Scene, opts: &TessOptions) -> Result<TriScene, LoadErr
     );
     let samples = w * h * n * n;
     let mut budget = Budget {
-        limit: opts.memory_budget.unwrap_or(DEFAULT_MEMORY_BUDGET),
-        image: samples
-            .saturating_mul(BYTES_PER_SAMPLE)
-            .saturating_add(w * h * BYTES_PER_PIXEL),
+        shared,
         samples,
         triangles: 0,
     };
-    budget.add(0, scene, &format!("a {w}x{h} image with {n}x{n} samples"))?;
+    budget.image(
+        samples
+            .saturating_mul(BYTES_PER_SAMPLE)
+            .saturating_add(w * h * BYTES_PER_PIXEL),
+        scene,
+        &format!(
+            "a {w}x{h} image with {n}x{n} samples ({samples} samples at {BYTES_PER_SAMPLE} B)"
+        ),
+    )?;
     for obj in &scene.objects {
         let piece = object_piece(scene, obj, &camera, err_px, &mut out.warnings, &mut budget)?;
         append(scene, obj, piece, &mut out)?;
@@ -762,11 +783,11 @@ fn object_piece(
     camera: &Camera,
     err_px: f64,
     warnings: &mut Vec<String>,
-    budget: &mut Budget,
+    budget: &mut Budget<'_>,
 ) -> Result<Piece, LoadError> {
     // A grid of n segments around and n/2 rings has n² triangles (less the
     // poles): counted before it is built.
-    let grid = |n: u32, budget: &mut Budget| {
+    let grid = |n: u32, budget: &mut Budget<'_>| {
         budget.add(
             u64::from(n) * u64::from(n),
             scene,

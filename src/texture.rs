@@ -57,11 +57,36 @@ impl Texture {
     /// [`TextureError`] when the bytes are not a PNG the decoder accepts or
     /// the image is larger than [`Texture::MAX_SIDE`] on a side.
     pub fn from_png_bytes(path: &Path, bytes: &[u8]) -> Result<Texture, TextureError> {
+        Texture::from_png_bytes_within(path, bytes, &crate::budget::Budget::default())
+    }
+
+    /// Bytes a texture holds per texel (four f32 channels).
+    pub const BYTES_PER_TEXEL: u64 = 16;
+
+    /// [`Texture::from_png_bytes`], reserving the texels in `budget` from
+    /// the header's size before anything is decoded; the decoder's own
+    /// allocations (its buffers, and any chunk it inflates, such as an ICC
+    /// profile) are capped at what the budget has left.
+    ///
+    /// # Errors
+    ///
+    /// As [`Texture::from_png_bytes`], or the figure that does not fit.
+    pub fn from_png_bytes_within(
+        path: &Path,
+        bytes: &[u8],
+        budget: &crate::budget::Budget,
+    ) -> Result<Texture, TextureError> {
         use image::ImageDecoder;
         let err = |m: String| TextureError { message: m };
-        let mut decoder = image::codecs::png::PngDecoder::new(std::io::Cursor::new(bytes))
-            .map_err(|e| err(format!("not a readable PNG: {e}")))?;
-        decoder.set_limits(image::Limits::default()).ok();
+        let mut limits = image::Limits::default();
+        limits.max_image_width = Some(Self::MAX_SIDE);
+        limits.max_image_height = Some(Self::MAX_SIDE);
+        limits.max_alloc = Some(budget.remaining());
+        let mut decoder = image::codecs::png::PngDecoder::with_limits(
+            std::io::Cursor::new(bytes),
+            limits.clone(),
+        )
+        .map_err(|e| err(format!("not a readable PNG: {e}")))?;
         let (w, h) = decoder.dimensions();
         if w == 0 || h == 0 || w > Self::MAX_SIDE || h > Self::MAX_SIDE {
             return Err(err(format!(
@@ -69,6 +94,22 @@ impl Texture {
                 Self::MAX_SIDE
             )));
         }
+        // The texels stay; the decoded image and its RGBA copy are freed
+        // once converted: at most 16 B per texel more while decoding.
+        let texels = u64::from(w) * u64::from(h);
+        budget
+            .reserve(texels * Self::BYTES_PER_TEXEL, || {
+                format!("the {w}x{h} texture's texels")
+            })
+            .map_err(|e| err(e.to_string()))?;
+        if let Err(e) = budget.check(texels * Self::BYTES_PER_TEXEL, || {
+            format!("decoding the {w}x{h} texture")
+        }) {
+            budget.release(texels * Self::BYTES_PER_TEXEL);
+            return Err(err(e.to_string()));
+        }
+        limits.max_alloc = Some(budget.remaining());
+        decoder.set_limits(limits).ok();
         let color = decoder.color_type();
         let img = image::DynamicImage::from_decoder(decoder)
             .map_err(|e| err(format!("not a readable PNG: {e}")))?;

@@ -314,10 +314,15 @@ fn povray_cmp(scenes: &[PathBuf], threads: &[usize], repeats: usize) -> Result<(
                     continue;
                 };
                 let pov_ms = povray_time(&job, r, n, repeats.min(3), &work)?;
-                let frame = p.install(|| job.render_with_depth(backend, r.max_depth).frame);
+                let frame =
+                    p.install(|| job.render_with_depth(backend, r.max_depth).unwrap().frame);
                 let ours = median(
                     (0..repeats)
-                        .map(|_| p.install(|| job.render_with_depth(backend, r.max_depth).time_ms))
+                        .map(|_| {
+                            p.install(|| {
+                                job.render_with_depth(backend, r.max_depth).unwrap().time_ms
+                            })
+                        })
                         .collect(),
                 );
                 let pct = within(&job, &frame, variant)

@@ -382,7 +382,7 @@ impl Bench {
                 let mut partial: Vec<Row> = Vec::new();
                 for (c, r) in fresh.iter().zip(&runs) {
                     let (ref_label, ref_pixels) = &refs[&(c.backend, c.reference)];
-                    partial.push(r.first_row(scene, c, ref_label, ref_pixels));
+                    partial.push(r.first_row(scene, c, ref_label, ref_pixels)?);
                 }
                 // Each timed render follows an untimed one of the same
                 // setting, so what the previous setting left in the caches
@@ -392,9 +392,9 @@ impl Bench {
                 for _ in 0..self.opts.repeats {
                     for (k, r) in runs.iter().enumerate() {
                         if runs.len() > 1 {
-                            let _ = r.render();
+                            r.render()?;
                         }
-                        times[k].push(r.render().time_ms);
+                        times[k].push(r.render()?.time_ms);
                     }
                 }
                 for ((c, mut row), mut t) in fresh.iter().zip(partial).zip(times) {
@@ -472,7 +472,7 @@ impl Bench {
             label.push_str(" d1");
         }
         let job = Prepared::from_scene(s, &ov)?;
-        Ok((label, job.render(Backend::Ray).frame.color))
+        Ok((label, job.render(Backend::Ray)?.frame.color))
     }
 
     /// A stored POV-Ray reference, if it is current and of the right size.
@@ -519,7 +519,7 @@ impl Runner {
         })
     }
 
-    fn render(&self) -> crate::Rendered {
+    fn render(&self) -> Result<crate::Rendered, Error> {
         match &self.pool {
             Some(p) => p.install(|| self.job.render(self.backend)),
             None => self.job.render(self.backend),
@@ -527,15 +527,21 @@ impl Runner {
     }
 
     /// The untimed first render: everything but the times.
-    fn first_row(&self, scene: &Scene, case: &Case, ref_label: &str, reference: &[Rgb]) -> Row {
-        let first = self.render();
+    fn first_row(
+        &self,
+        scene: &Scene,
+        case: &Case,
+        ref_label: &str,
+        reference: &[Rgb],
+    ) -> Result<Row, Error> {
+        let first = self.render()?;
         let err = image_error(&first.frame.color, reference);
         let rays = match first.work {
             Work::Ray { rays, .. } => rays.primary + rays.shadow + rays.secondary,
             Work::Raster(s) | Work::Painter { raster: s, .. } => s.shadow_rays,
         };
         let cam = &self.job.tri.camera;
-        Row {
+        Ok(Row {
             scene: scene.name(),
             backend: case.backend,
             sweep: case.sweep,
@@ -556,7 +562,7 @@ impl Runner {
             beyond2_pct: err.beyond2_pct,
             max8: err.max8,
             rays,
-        }
+        })
     }
 }
 

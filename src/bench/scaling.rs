@@ -200,9 +200,9 @@ pub fn run(opts: &ScalingOptions, progress: &dyn Fn(&str)) -> Result<Vec<Scaling
         let job = Prepared::from_scene(sphere_scene(n, opts.size)?, &Overrides::default())?;
         let tris = job.tri.len();
         let raster = (0..=opts.repeats)
-            .map(|_| job.render(Backend::Raster).time_ms)
+            .map(|_| job.render(Backend::Raster).map(|r| r.time_ms))
             .skip(1)
-            .collect();
+            .collect::<Result<_, _>>()?;
         rows.push(ScalingRow {
             series: "triangles",
             what: "raster",
@@ -267,7 +267,7 @@ pub fn run(opts: &ScalingOptions, progress: &dyn Fn(&str)) -> Result<Vec<Scaling
             let mut times = Vec::new();
             let mut rays = 0;
             for k in 0..=opts.repeats {
-                let r = job.render(backend);
+                let r = job.render(backend)?;
                 if k > 0 {
                     times.push(r.time_ms);
                 }

@@ -34,6 +34,7 @@ use super::{
     RasterOptions, RasterStats, Record, Rule, homogeneous, records, shade_pass, visibility_with,
 };
 use crate::accel::{Accel, AccelOptions, ShadowRays};
+use crate::budget::{Budget, OverBudget};
 use crate::camera::Projection;
 use crate::color::to_srgb8;
 use crate::coverage::SampleGrid;
@@ -42,6 +43,14 @@ use crate::math::{Bary, DVec3, to_f64};
 use crate::options::PainterSort;
 use crate::shade::{self, Unoccluded, Visibility};
 use crate::tri_scene::TriScene;
+
+/// Bytes per entry of the painter's screen grid (a triangle index in a
+/// cell's list, with the list's share of the map).
+const CELL_ENTRY_BYTES: u64 = 8;
+
+/// Bytes per candidate pair: its key (8 B), its decision (12 B), and the
+/// sort's scratch (8 B).
+const PAIR_BYTES: u64 = 28;
 
 /// What ordering the triangles found.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -80,13 +89,18 @@ struct Item<'r> {
 
 /// The drawing rank of every triangle (`u32::MAX` for those that cover no
 /// sample) and what the ordering found.
-#[must_use]
+///
+/// # Errors
+///
+/// [`OverBudget`] when Newell's pair lists would not fit `budget` (they
+/// grow with the square of the triangles that overlap on screen).
 pub fn order(
     scene: &TriScene,
     opts: &RasterOptions,
     sort: PainterSort,
-) -> (Vec<u32>, PainterStats) {
-    order_records(scene, sort, &painter_records(scene, opts))
+    budget: &Budget,
+) -> Result<(Vec<u32>, PainterStats), OverBudget> {
+    order_records(scene, sort, &painter_records(scene, opts), budget)
 }
 
 /// The scan-conversion records of every triangle the options do not cull.
@@ -110,7 +124,12 @@ fn painter_records(scene: &TriScene, opts: &RasterOptions) -> Vec<Record> {
 }
 
 /// The drawing rank of the triangles of `recs` (see [`order`]).
-fn order_records(scene: &TriScene, sort: PainterSort, recs: &[Record]) -> (Vec<u32>, PainterStats) {
+fn order_records(
+    scene: &TriScene,
+    sort: PainterSort,
+    recs: &[Record],
+    budget: &Budget,
+) -> Result<(Vec<u32>, PainterStats), OverBudget> {
     let cam = &scene.camera;
     let (w, h) = (i64::from(cam.width()) * 256, i64::from(cam.height()) * 256);
     let items = items(scene, recs, (w, h));
@@ -132,13 +151,13 @@ fn order_records(scene: &TriScene, sort: PainterSort, recs: &[Record]) -> (Vec<u
             });
             idx
         }
-        PainterSort::Newell => newell(&items, cam.projection(), &mut stats, centroid),
+        PainterSort::Newell => newell(&items, cam.projection(), &mut stats, centroid, budget)?,
     };
     let mut rank = vec![u32::MAX; scene.len()];
     for (k, &i) in sequence.iter().enumerate() {
         rank[items[i].tri as usize] = u32::try_from(k).unwrap_or(u32::MAX);
     }
-    (rank, stats)
+    Ok((rank, stats))
 }
 
 /// The painter's items: every triangle with at least one record.
@@ -264,7 +283,8 @@ fn newell(
     projection: Projection,
     stats: &mut PainterStats,
     centroid: &(dyn Fn(&Item<'_>) -> f64 + Sync),
-) -> Vec<usize> {
+    budget: &Budget,
+) -> Result<Vec<usize>, OverBudget> {
     let n = items.len();
     // Candidate pairs: bounding boxes sharing a cell of a screen grid, the
     // cells sized for about eight triangles each on average (4 … 64 px).
@@ -275,6 +295,20 @@ fn newell(
     #[expect(clippy::cast_possible_truncation, reason = "clamped to 4 … 64 px")]
     let cell_px = (8.0 * area / n.max(1) as f64).sqrt().clamp(4.0, 64.0) as i64;
     let cell = cell_px * 256;
+    // The grid's lists and the pair lists grow with the overlap, up to the
+    // square of the triangles: counted before they are made (and given back
+    // once the order is known).
+    let cells_of = |it: &Item<'_>| {
+        let span = |lo: i64, hi: i64| {
+            u64::try_from(hi.div_euclid(cell) - lo.div_euclid(cell) + 1).unwrap_or(u64::MAX)
+        };
+        span(it.lo.0, it.hi.0).saturating_mul(span(it.lo.1, it.hi.1))
+    };
+    let entries: u64 = items.iter().map(cells_of).fold(0, u64::saturating_add);
+    let grid_bytes = entries.saturating_mul(CELL_ENTRY_BYTES);
+    budget.reserve(grid_bytes, || {
+        format!("the painter's screen grid ({entries} cell entries at {CELL_ENTRY_BYTES} B)")
+    })?;
     let mut cells: std::collections::HashMap<(i64, i64), Vec<u32>> =
         std::collections::HashMap::new();
     for (i, it) in items.iter().enumerate() {
@@ -284,6 +318,17 @@ fn newell(
                 cells.entry((cx, cy)).or_default().push(i);
             }
         }
+    }
+    let candidates: u64 = cells
+        .values()
+        .map(|l| (l.len() as u64).saturating_mul((l.len() as u64).saturating_sub(1)) / 2)
+        .fold(0, u64::saturating_add);
+    let pair_bytes = candidates.saturating_mul(PAIR_BYTES);
+    if let Err(e) = budget.reserve(pair_bytes, || {
+        format!("Newell's order of {n} triangles ({candidates} candidate pairs at {PAIR_BYTES} B)")
+    }) {
+        budget.release(grid_bytes);
+        return Err(e);
     }
     let mut pairs: Vec<u64> = cells
         .values()
@@ -388,37 +433,50 @@ fn newell(
             }
         }
     }
-    out
+    budget.release(grid_bytes.saturating_add(pair_bytes));
+    Ok(out)
 }
 
 /// Renders with the painter: the drawing order, list-priority visibility
 /// on the shared sample grid, and the rasterizer's deferred shading.
-#[must_use]
+///
+/// # Errors
+///
+/// [`OverBudget`] as [`order`].
 pub fn render(
     scene: &TriScene,
     opts: &RasterOptions,
     sort: PainterSort,
-) -> (Frame, RasterStats, PainterStats) {
-    let (rank, pstats) = order(scene, opts, sort);
+    budget: &Budget,
+) -> Result<(Frame, RasterStats, PainterStats), OverBudget> {
+    let (rank, pstats) = order(scene, opts, sort, budget)?;
     let vis = visibility_with(scene, opts, &Rule::Painter(&rank));
     let mut stats = vis.stats;
     let (frame, shadow_rays, shadow_maps) = shade_pass(scene, opts, &vis);
     stats.shadow_bvh = opts.shadows_needed && opts.shadows == crate::options::ShadowMode::Rays;
     stats.shadow_rays = shadow_rays;
     stats.shadow_maps = shadow_maps;
-    (frame, stats, pstats)
+    Ok((frame, stats, pstats))
 }
 
 /// The painter's picture drawn with anti-aliased fills: every triangle (as
 /// clipped and snapped for scan conversion) in drawing order, in one flat
 /// colour shaded at its centroid (shadows by shadow rays when the options
 /// ask for shadows). Returns 8-bit sRGB RGBA pixels, `width × height`.
-#[must_use]
-pub fn draw_smooth(scene: &TriScene, opts: &RasterOptions, sort: PainterSort) -> Vec<u8> {
+///
+/// # Errors
+///
+/// [`OverBudget`] as [`order`].
+pub fn draw_smooth(
+    scene: &TriScene,
+    opts: &RasterOptions,
+    sort: PainterSort,
+    budget: &Budget,
+) -> Result<Vec<u8>, OverBudget> {
     let cam = &scene.camera;
     let (w, h) = (cam.width(), cam.height());
     let mut recs = painter_records(scene, opts);
-    let (rank, _) = order_records(scene, sort, &recs);
+    let (rank, _) = order_records(scene, sort, &recs, budget)?;
     recs.sort_by_key(|r| rank.get(r.tri as usize).copied().unwrap_or(u32::MAX));
     let ctx = scene.shade_context(opts.gate_eps, opts.shadows_needed);
     let accel = opts
@@ -432,7 +490,7 @@ pub fn draw_smooth(scene: &TriScene, opts: &RasterOptions, sort: PainterSort) ->
     let third = 1.0f32 / 3.0;
     let bg = scene.background;
     let Some(mut pixmap) = tiny_skia::Pixmap::new(w.max(1), h.max(1)) else {
-        return vec![0; (w as usize) * (h as usize) * 4];
+        return Ok(vec![0; (w as usize) * (h as usize) * 4]);
     };
     pixmap.fill(tiny_skia::Color::from_rgba8(
         to_srgb8(bg.r),
@@ -483,5 +541,5 @@ pub fn draw_smooth(scene: &TriScene, opts: &RasterOptions, sort: PainterSort) ->
             );
         }
     }
-    pixmap.data().to_vec()
+    Ok(pixmap.data().to_vec())
 }

@@ -433,6 +433,40 @@ pub fn load_obj_bytes(path: &Path, bytes: &[u8]) -> Result<MeshData, LoadError> 
     Ok(data)
 }
 
+/// Bytes a loaded mesh holds per position, normal, uv and triangle
+/// (`MeshData`'s arrays).
+pub(crate) fn mesh_bytes(d: &MeshData) -> u64 {
+    (d.positions.len() * 12 + d.normals.len() * 12 + d.uvs.len() * 8 + d.triangles.len() * 44)
+        as u64
+}
+
+/// [`load_obj_bytes`], reserving the mesh's data in `budget`.
+///
+/// # Errors
+///
+/// As [`load_obj_bytes`], or the figure that does not fit the budget.
+pub fn load_obj_within(
+    path: &Path,
+    bytes: &[u8],
+    budget: &crate::budget::Budget,
+) -> Result<MeshData, LoadError> {
+    let d = load_obj_bytes(path, bytes)?;
+    budget
+        .reserve(mesh_bytes(&d), || {
+            format!(
+                "the mesh's {} vertices and {} triangles",
+                d.positions.len(),
+                d.triangles.len()
+            )
+        })
+        .map_err(|e| LoadError::Mesh {
+            path: path.to_path_buf(),
+            line: None,
+            message: e.to_string(),
+        })?;
+    Ok(d)
+}
+
 /// Reads and loads an OBJ file.
 ///
 /// # Errors

@@ -34,8 +34,8 @@ fn finite(f: &Frame) -> bool {
 /// Renders a prepared scene with both backends and checks the frames:
 /// finite, and no real visibility mismatch. Returns the agreeing samples.
 fn both_agree(job: &Prepared, what: &str) -> u64 {
-    let a = job.render(Backend::Raster).frame;
-    let b = job.render(Backend::Ray).frame;
+    let a = job.render(Backend::Raster).unwrap().frame;
+    let b = job.render(Backend::Ray).unwrap().frame;
     assert!(finite(&a) && finite(&b), "{what}: a non-finite pixel");
     let c = compare_frames(
         &job.tri,
@@ -285,7 +285,10 @@ fn eyes_lights_and_near_planes_inside_geometry() {
         .position(|o| o.closed && o.bounds.contains(Vec3::new(0.0, 0.8, -0.8)))
         .expect("the light is inside a closed sphere") as u32;
     for backend in [Backend::Raster, Backend::Ray] {
-        let (f, g) = (job.render(backend).frame, dark.render(backend).frame);
+        let (f, g) = (
+            job.render(backend).unwrap().frame,
+            dark.render(backend).unwrap().frame,
+        );
         let leaks = (0..f.id.len())
             .filter(|&i| {
                 let id = f.id[i];

@@ -14,7 +14,8 @@ const ALLOWED: &[(&str, &[&str])] = &[
     ("coverage", &[]),
     ("analytic", &[]),
     ("input", &[]),
-    ("texture", &["color", "input", "math"]),
+    ("budget", &[]),
+    ("texture", &["budget", "color", "input", "math"]),
     ("image_io", &["color", "input"]),
     ("camera", &["math"]),
     ("polygon", &["math"]),
@@ -23,7 +24,7 @@ const ALLOWED: &[(&str, &[&str])] = &[
     (
         "scene",
         &[
-            "color", "input", "math", "options", "polygon", "shade", "texture",
+            "budget", "color", "input", "math", "options", "polygon", "shade", "texture",
         ],
     ),
     (
@@ -32,7 +33,7 @@ const ALLOWED: &[(&str, &[&str])] = &[
     ),
     (
         "tessellate",
-        &["analytic", "camera", "math", "scene", "tri_scene"],
+        &["analytic", "budget", "camera", "math", "scene", "tri_scene"],
     ),
     (
         "accel",
@@ -44,6 +45,7 @@ const ALLOWED: &[(&str, &[&str])] = &[
         "raster",
         &[
             "accel",
+            "budget",
             "camera",
             "color",
             "coverage",

@@ -56,7 +56,7 @@ fn on_object(
 #[test]
 fn bump_methods_against_each_other_and_povray() {
     let job = load("bumps", &Overrides::default());
-    let frame = job.render(Backend::Ray).frame;
+    let frame = job.render(Backend::Ray).unwrap().frame;
     let pov = read_png_linear(&golden::reference_path(
         &root().join("golden/pov"),
         &job.scene,
@@ -88,7 +88,7 @@ fn bump_methods_against_each_other_and_povray() {
         .expect("a blinn material");
     blinn.bump.as_mut().expect("a bump map").method = BumpMethod::Pov;
     let other = Prepared::from_scene(scene, &Overrides::default()).unwrap();
-    let as_pov = other.render(Backend::Ray).frame;
+    let as_pov = other.render(Backend::Ray).unwrap().frame;
     let (within, mean, max) = on_object(&job, &frame, &as_pov.color, 1);
     report.push_str(&format!(
         "blinn vs pov on one sphere: {:.2} % within 2/255, mean {mean:.2}/255, max {max}/255\n",
@@ -110,8 +110,8 @@ fn no_bump_moves_a_silhouette() {
     }
     let smooth = Prepared::from_scene(scene, &Overrides::default()).unwrap();
     for backend in [Backend::Raster, Backend::Ray] {
-        let a = job.render(backend).frame;
-        let b = smooth.render(backend).frame;
+        let a = job.render(backend).unwrap().frame;
+        let b = smooth.render(backend).unwrap().frame;
         assert_eq!(a.id, b.id, "{backend}: a bump map changed what is visible");
         assert_ne!(a.color, b.color, "{backend}: the bumps changed nothing");
     }

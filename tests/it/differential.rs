@@ -92,7 +92,7 @@ fn perturbed(name: &str, perturb: Perturb) -> VisibilityCounts {
     let mut opts = job.raster_options();
     opts.perturb = perturb;
     let (fr, _) = raster::render(&job.tri, &opts);
-    let fy = job.render_with_depth(Backend::Ray, 1).frame;
+    let fy = job.render_with_depth(Backend::Ray, 1).unwrap().frame;
     let tol = derive_tolerances(&job.tri);
     compare_frames(&job.tri, &fr, &fy, &tol, job.settings.depth)
         .visibility

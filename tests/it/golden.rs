@@ -58,7 +58,7 @@ fn renders_match_their_goldens() {
     for name in bundled_scenes() {
         let job = load(&name, &Overrides::default());
         for backend in [Backend::Raster, Backend::Ray] {
-            let frame = job.render(backend).frame;
+            let frame = job.render(backend).unwrap().frame;
             let (w, h) = (frame.width, frame.height);
             let dir = root().join("golden").join(backend.to_string());
             let path = dir.join(format!("{name}.png"));

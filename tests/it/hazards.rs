@@ -178,8 +178,8 @@ fn far_is_the_same_with_and_without_the_plan() {
         "the sphere beyond far is culled"
     );
     for backend in [Backend::Raster, Backend::Ray] {
-        let a = planned.render(backend).frame;
-        let b = unplanned.render(backend).frame;
+        let a = planned.render(backend).unwrap().frame;
+        let b = unplanned.render(backend).unwrap().frame;
         assert_eq!(a.id, b.id, "{backend}");
         assert_eq!(a.color, b.color, "{backend}");
     }

@@ -23,8 +23,8 @@ fn against_zbuffer(
             ..Overrides::default()
         },
     );
-    let painter = job.render(Backend::Painter);
-    let raster = job.render(Backend::Raster);
+    let painter = job.render(Backend::Painter).unwrap();
+    let raster = job.render(Backend::Raster).unwrap();
     let Work::Painter { order, .. } = painter.work else {
         panic!("a painter render reported {:?}", painter.work);
     };
@@ -125,8 +125,10 @@ fn the_smooth_picture_covers_what_the_painter_covers() {
         &job.tri,
         &job.raster_options(),
         job.settings.painter_sort,
-    );
-    let frame = job.render(Backend::Painter).frame;
+        &job.budget,
+    )
+    .unwrap();
+    let frame = job.render(Backend::Painter).unwrap().frame;
     let bg = job.tri.background;
     let bg8 = [bg.r, bg.g, bg.b].map(rendiff::color::to_srgb8);
     let (mut same, mut soft) = (0usize, 0usize);

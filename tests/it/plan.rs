@@ -58,8 +58,8 @@ fn the_plan_never_changes_a_pixel() {
         let planned = load(&name, &Overrides::default());
         let unplanned = load(&name, &no_plan());
         for backend in [Backend::Raster, Backend::Ray] {
-            let a = planned.render(backend).frame;
-            let b = unplanned.render(backend).frame;
+            let a = planned.render(backend).unwrap().frame;
+            let b = unplanned.render(backend).unwrap().frame;
             let diff = differing_samples(&a, &b);
             assert_eq!(
                 unexplained_pixels(&a, &b, &diff),
@@ -140,14 +140,14 @@ max = [3.0, 0.0, 3.0]
 "#;
 
 fn raster_work(p: &Prepared) -> rendiff::raster::RasterStats {
-    match p.render(Backend::Raster).work {
+    match p.render(Backend::Raster).unwrap().work {
         Work::Raster(s) => s,
         other => panic!("a raster render reported {other:?}"),
     }
 }
 
 fn ray_work(p: &Prepared) -> (rendiff::ray::RayStats, rendiff::accel::BvhStats) {
-    match p.render(Backend::Ray).work {
+    match p.render(Backend::Ray).unwrap().work {
         Work::Ray { rays, bvh } => (rays, bvh),
         other => panic!("a ray render reported {other:?}"),
     }
@@ -155,8 +155,8 @@ fn ray_work(p: &Prepared) -> (rendiff::ray::RayStats, rendiff::accel::BvhStats) 
 
 fn same_frames(a: &Prepared, b: &Prepared, what: &str) {
     for backend in [Backend::Raster, Backend::Ray] {
-        let fa = a.render(backend).frame;
-        let fb = b.render(backend).frame;
+        let fa = a.render(backend).unwrap().frame;
+        let fb = b.render(backend).unwrap().frame;
         assert!(
             differing_samples(&fa, &fb).is_empty(),
             "{what}: {backend} differs with and without the plan"

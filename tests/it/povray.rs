@@ -131,7 +131,7 @@ fn against(
                 },
             )
         }
-        _ => job.render_with_depth(backend, depth).frame,
+        _ => job.render_with_depth(backend, depth).unwrap().frame,
     };
     let (frac, max8) = within(&frame.color, &reference.pixels);
     let accel = Accel::new(&job.tri, AccelOptions::default());
@@ -271,7 +271,7 @@ fn tessellation_error_against_povray_analytic() {
             let mut scene = base.clone();
             scene.render.tessellation_error = err;
             let job = Prepared::from_scene(scene, &Overrides::default()).unwrap();
-            let frame = job.render(Backend::Ray).frame;
+            let frame = job.render(Backend::Ray).unwrap().frame;
             let mut beyond = 0usize;
             let mut sum = 0.0f64;
             let mut max = 0u8;
@@ -305,7 +305,7 @@ fn tessellation_error_against_povray_analytic() {
             },
         )
         .unwrap();
-        let frame = job.render(Backend::Ray).frame;
+        let frame = job.render(Backend::Ray).unwrap().frame;
         let (frac, max) = within(&frame.color, &reference.pixels);
         let beyond = ((1.0 - frac) * frame.color.len() as f64).round() as usize;
         table.push_str(&format!(

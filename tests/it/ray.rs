@@ -320,7 +320,7 @@ fn visibility_is_the_same_at_any_scale() {
     for name in ["spheres", "glass", "inside"] {
         let base_scene = Scene::load(&scene_path(name)).unwrap();
         let base = Prepared::from_scene(base_scene.clone(), &Overrides::default()).unwrap();
-        let fb = base.render(Backend::Ray).frame;
+        let fb = base.render(Backend::Ray).unwrap().frame;
         for (scale, offset) in [
             (1e-3, DVec3::ZERO),
             (1e5, DVec3::ZERO),
@@ -334,7 +334,7 @@ fn visibility_is_the_same_at_any_scale() {
                 base.tri.len(),
                 "{name} ×{scale} +{offset}: tessellation changed"
             );
-            let f = job.render(Backend::Ray).frame;
+            let f = job.render(Backend::Ray).unwrap().frame;
             // Visibility: every differing id is explained (no real mismatch)
             // by the oracle of the scaled scene.
             let cam = &job.tri.camera;
@@ -382,9 +382,9 @@ fn output_does_not_depend_on_the_thread_count() {
     for name in ["spheres", "glass", "dense"] {
         let job = load(name, &Overrides::default());
         for backend in [Backend::Ray, Backend::Raster] {
-            let one = with_threads(1, || job.render(backend).frame);
+            let one = with_threads(1, || job.render(backend).unwrap().frame);
             for n in [2, 8] {
-                let other = with_threads(n, || job.render(backend).frame);
+                let other = with_threads(n, || job.render(backend).unwrap().frame);
                 assert!(
                     one == other,
                     "{name} {backend}: 1 thread and {n} threads differ"
@@ -657,7 +657,7 @@ radius = 1.0
         );
         let scene = Scene::from_str(&scene_path("inline"), &text).unwrap();
         let job = Prepared::from_scene(scene, &Overrides::default()).unwrap();
-        let frame = job.render(Backend::Ray).frame;
+        let frame = job.render(Backend::Ray).unwrap().frame;
         let cam = &job.tri.camera;
         let mut checked = 0;
         // Error bound: every input carries an f32 rounding (≤ 2^-24
@@ -766,8 +766,8 @@ radius = 1.0
         let job0 =
             Prepared::from_scene(base0.scaled(scale, offset), &Overrides::default()).unwrap();
         let (f, f0) = (
-            job.render(Backend::Ray).frame,
-            job0.render(Backend::Ray).frame,
+            job.render(Backend::Ray).unwrap().frame,
+            job0.render(Backend::Ray).unwrap().frame,
         );
         let t = &job.tri;
         let mut shadow_acne = 0;

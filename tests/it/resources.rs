@@ -30,7 +30,7 @@ fn memory_per_triangle_and_per_sample_is_within_the_budgeted_figures() {
             "{name}"
         );
         // Per sample: the frame's buffers and the rasterizer's.
-        let frame = job.render(Backend::Ray).frame;
+        let frame = job.render(Backend::Ray).unwrap().frame;
         let vis = raster::visibility(&job.tri, &job.raster_options());
         let samples = frame.id.len();
         let sample_bytes = std::mem::size_of_val(frame.depth.as_slice())

@@ -615,7 +615,8 @@ fn render(a: &RenderArgs) -> Result<Outcome> {
             &job.tri,
             &job.raster_options(),
             job.settings.painter_sort,
-        );
+            &job.budget,
+        )?;
         let (w, h) = (job.tri.camera.width(), job.tri.camera.height());
         rendiff::image_io::write_png_rgba8(&out, w, h, &rgba)?;
         say(&format!(
@@ -627,7 +628,7 @@ fn render(a: &RenderArgs) -> Result<Outcome> {
         ));
         return Ok(Outcome::Ok);
     }
-    let r = job.render(backend);
+    let r = job.render(backend)?;
     r.frame.write_png(&out, encoding(&a.flags))?;
     if let Some(dir) = &a.flags.gbuffer {
         r.frame.write_gbuffer(dir)?;
