@@ -6,12 +6,13 @@
 //! so the rasterizer (shading) and the ray tracer (casting) see bit-identical
 //! rays.
 //!
-//! **One eye.** The eye is rounded to the nearest `f32` point once, when
-//! the camera is built, and everything starts from that point: the
-//! rasterizer's projection, the ray tracer's ray origins (which are `f32`),
-//! the verdict's oracle and the POV-Ray export. An eye off the `f32` grid
-//! would otherwise be two eyes, up to half an `f32` step apart: at 10⁶
-//! that is 0.03 units, which moved crossing lines by several pixels.
+//! **One eye.** The ray tracer casts the `f64` camera rays themselves
+//! ([`Camera::primary_ray64`]), the rays the rasterizer projects with and
+//! the verdict's oracle evaluates, so both start at the one `f64` eye. (An
+//! `f32` ray origin was a second eye, up to half an `f32` step away: at
+//! 10⁶ that is 0.03 units, which moved crossing lines by several pixels;
+//! rounding the eye onto the `f32` grid instead would move it onto a
+//! floor it hovers a millionth above.)
 //!
 //! Screen coordinates run from (0, 0) at the top-left corner of the image to
 //! (width, height); the sample grid has `n·width × n·height` cells and the
@@ -33,6 +34,57 @@ pub enum Projection {
         /// Height of the view in world units.
         view_height: f64,
     },
+}
+
+/// The smallest angle a pixel may span (perspective), and the smallest
+/// pixel size relative to the eye's distance from the origin
+/// (orthographic): 2⁻³⁰. Below it the `f64` rounding of a camera ray
+/// (γ₆₄(64) ≈ 7e-15 of the coordinates involved, over the few dozen
+/// operations of the projection, the ray–triangle test and the oracle)
+/// would exceed 1/64 px — the widest edge tie — for geometry 2¹⁰ times
+/// farther from the eye than the surface it hides, and the verdict could
+/// not be trusted; such a view is refused rather than judged.
+pub const MIN_PIXEL_ANGLE: f64 = 1.0 / 1_073_741_824.0;
+
+/// What is wrong with a view too narrow for `f64` camera rays
+/// ([`MIN_PIXEL_ANGLE`]), as `(key, message)`; `None` when it is fine.
+/// `eye` is the eye's largest coordinate in magnitude.
+#[must_use]
+pub fn resolution_problem(
+    projection: Projection,
+    eye: f64,
+    width: u32,
+    height: u32,
+) -> Option<(&'static str, String)> {
+    let (w, h) = (f64::from(width.max(1)), f64::from(height.max(1)));
+    match projection {
+        Projection::Perspective { tan_half_fov: t } => {
+            // The smallest pixel angle is at the image corners.
+            let a = w / h;
+            let corner = 1.0 / (1.0 + t * t * (1.0 + a * a));
+            let angle = 2.0 * t / h * corner;
+            (angle.is_nan() || angle < MIN_PIXEL_ANGLE).then(|| {
+                (
+                    "fov_y",
+                    format!(
+                        "a field of view this narrow gives pixels {angle:.3e} rad wide at {width}x{height}, below the {MIN_PIXEL_ANGLE:.3e} rad that f64 camera rays resolve; widen it or render fewer pixels"
+                    ),
+                )
+            })
+        }
+        Projection::Orthographic { view_height } => {
+            let size = view_height / h;
+            let reach = eye.abs() + view_height;
+            (size.is_nan() || size < MIN_PIXEL_ANGLE * reach).then(|| {
+                (
+                    "view_height",
+                    format!(
+                        "a view {view_height:.3e} high at {eye:.3e} from the origin gives pixels {size:.3e} across at {width}x{height}, below the {MIN_PIXEL_ANGLE:.3e} of that distance that f64 camera rays resolve; enlarge it, move the scene nearer the origin or render fewer pixels"
+                    ),
+                )
+            })
+        }
+    }
 }
 
 /// Errors in building a camera.
@@ -63,7 +115,7 @@ pub enum CameraError {
 /// # Guarantees
 ///
 /// `f`, `r`, `u` are orthonormal (right-handed: `r = f × up`, `u = r × f`),
-/// the eye is an `f32` point, `0 < near < far`, `width, height ≥ 1`,
+/// the eye is finite, `0 < near < far`, `width, height ≥ 1`,
 /// `samples ∈ {1, 2, 4, 8, 16}`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Camera {
@@ -80,8 +132,7 @@ pub struct Camera {
 }
 
 impl Camera {
-    /// A camera looking from `eye` (rounded to the nearest `f32` point) at
-    /// `look_at`.
+    /// A camera looking from `eye` at `look_at`.
     ///
     /// # Errors
     ///
@@ -101,13 +152,20 @@ impl Camera {
         near: f64,
         far: f64,
     ) -> Result<Camera, CameraError> {
-        let eye = crate::math::to_f64(to_f32(eye));
-        if !eye.is_finite() {
+        if !eye.is_finite() || !to_f32(eye).is_finite() {
             return Err(CameraError::EyeNotFinite);
         }
         let f = (look_at - eye)
             .try_normalize()
             .ok_or(CameraError::EyeAtTarget)?;
+        // Scaled to its largest component first: `up = [0, 1e308, 1e308]`
+        // is a direction, not an overflow.
+        let big = up.abs().max_element();
+        let up = if big > 0.0 && big.is_finite() {
+            up / big
+        } else {
+            up
+        };
         let r = f.cross(up);
         // up ∦ f: the cross product must not vanish relative to |up|.
         if r.length() <= 1e-9 * up.length() || up.length() == 0.0 {

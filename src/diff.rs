@@ -79,6 +79,8 @@ pub enum Output {
         pixels: Vec<Rgb>,
         /// Read as 16-bit linear (else 8-bit sRGB).
         linear16: bool,
+        /// How long POV-Ray took, when it rendered the image just now.
+        rendered_ms: Option<f64>,
     },
 }
 
@@ -100,7 +102,7 @@ impl Output {
     fn time(&self) -> Option<f64> {
         match self {
             Output::Frame(_, t) => Some(*t),
-            Output::Image { .. } => None,
+            Output::Image { rendered_ms, .. } => *rendered_ms,
         }
     }
 }
@@ -193,6 +195,7 @@ fn produce(job: &Prepared, side: &Side, max_depth: u32) -> Result<(Output, Optio
             } else {
                 Variant::Main
             };
+            let started = std::time::Instant::now();
             let img = if *render {
                 golden::povray_version().map_err(|e| Error::Usage(e.to_string()))?;
                 let refs = golden::references(&job.scene, &job.tri)
@@ -227,6 +230,7 @@ fn produce(job: &Prepared, side: &Side, max_depth: u32) -> Result<(Output, Optio
                 height: img.height,
                 pixels: img.pixels,
                 linear16: img.linear16,
+                rendered_ms: render.then(|| started.elapsed().as_secs_f64() * 1e3),
             }
         }
         Side::Backend(b) => {
@@ -265,6 +269,7 @@ fn produce(job: &Prepared, side: &Side, max_depth: u32) -> Result<(Output, Optio
                 height: img.height,
                 pixels: img.pixels,
                 linear16: img.linear16,
+                rendered_ms: None,
             }
         }
     };

@@ -29,6 +29,7 @@ pub mod analytic;
 pub mod bench;
 pub mod budget;
 pub mod camera;
+pub mod cleanup;
 pub mod color;
 pub mod compare;
 pub mod coverage;

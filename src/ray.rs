@@ -331,14 +331,16 @@ impl Tracer<'_, '_> {
                         // Total internal reflection: the mirror ray, added
                         // unfiltered, staying inside; no `reflection` here.
                         total_internal = true;
-                        let ray = Self::spawn(sp, shade::reflect(d, shaded.normal));
+                        let dir = shade::reflect_bumped(d, shaded.normal, shaded.raw_normal);
+                        let ray = Self::spawn(sp, dir);
                         c += self.trace(w, &ray, depth.deeper(), inside);
                     }
                 }
             }
         }
         if shaded.reflection > 0.0 && !total_internal {
-            let ray = Self::spawn(sp, shade::reflect(d, shaded.normal));
+            let dir = shade::reflect_bumped(d, shaded.normal, shaded.raw_normal);
+            let ray = Self::spawn(sp, dir);
             c += self.trace(w, &ray, depth.deeper(), inside) * shaded.reflection;
         }
         c

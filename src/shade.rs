@@ -353,12 +353,21 @@ pub struct Shaded {
     pub local: Rgb,
     /// The shading normal used (perturbed, flipped toward the viewer).
     pub normal: Vec3,
+    /// The shading normal before any bump map (flipped toward the viewer):
+    /// POV-Ray's raw normal, which keeps reflected rays on the viewer's
+    /// side ([`reflect_bumped`]).
+    pub raw_normal: Vec3,
     /// Reflection weight `r` (the tracer adds `r·C(mirror ray)`).
     pub reflection: f32,
     /// Transmission weight `f·P + t` (the tracer adds it times `C_behind`).
     pub transmit: Rgb,
     /// Shading flags: [`FLAG_DISCONTINUITY`] and [`shadow_flag`] bits.
     pub flags: u32,
+}
+
+/// `n`, or `−n` when it faces away from a viewer looking along `d`.
+fn flipped_toward(n: Vec3, d: Vec3) -> Vec3 {
+    if n.dot(d) > 0.0 { -n } else { n }
 }
 
 /// The bump-perturbed shading normal, flipped toward the viewer first.
@@ -530,6 +539,7 @@ pub fn shade(ctx: &ShadeContext<'_>, sp: &SurfacePoint, d: Vec3, vis: &dyn Visib
     Shaded {
         local: diffuse_sum * opacity + highlights,
         normal: n,
+        raw_normal: flipped_toward(sp.ns, d),
         reflection: m.reflection,
         transmit: pig * f + Rgb::splat(t),
         flags,
@@ -576,6 +586,30 @@ pub fn refract(d: Vec3, n: Vec3, eta: f32) -> Option<Vec3> {
         return None;
     }
     Some((d * eta + n * (eta * c - q.sqrt())).normalize())
+}
+
+/// The reflected direction at a bump-mapped surface, as POV-Ray 3.7 makes
+/// it (its "reflection bugfix" of 1998, `Trace::ComputeReflection`): the
+/// mirror of `d` about the perturbed normal `n`, unless that turns into
+/// the surface (against the raw normal `raw`): then the mirror about `raw`
+/// where the ray also goes against `n`, else the perturbed mirror
+/// reflected once more about `raw`. Without bumps (`n == raw`) it is the
+/// plain mirror. (A bump can tilt the normal so far that the plain mirror
+/// of a grazing ray points below the surface; it would then see what lies
+/// under the floor.)
+#[must_use]
+pub fn reflect_bumped(d: Vec3, n: Vec3, raw: Vec3) -> Vec3 {
+    let r = d - n * (2.0 * d.dot(n));
+    let k = r.dot(raw);
+    if k >= 0.0 {
+        return r;
+    }
+    let fixed = if r.dot(n) < 0.0 {
+        d - raw * (2.0 * d.dot(raw))
+    } else {
+        r - raw * (2.0 * k)
+    };
+    fixed.normalize_or_zero()
 }
 
 /// The mirror direction of unit `d` about unit `n`.

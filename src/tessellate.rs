@@ -153,57 +153,24 @@ pub fn scene_camera(scene: &Scene, opts: &TessOptions) -> Result<Camera, LoadErr
     Ok(camera)
 }
 
-/// The smallest angle a pixel may span (perspective), and the smallest
-/// pixel size relative to the eye's distance from the origin
-/// (orthographic): 2⁻³⁰. Below it the `f64` rounding of a camera ray
-/// (γ₆₄(64) ≈ 7e-15 of the coordinates involved, over the few dozen
-/// operations of the projection, the ray–triangle test and the oracle)
-/// would exceed 1/64 px — the widest edge tie — for geometry 2¹⁰ times
-/// farther from the eye than the surface it hides, and the verdict could
-/// not be trusted; such a view is refused rather than judged.
-pub const MIN_PIXEL_ANGLE: f64 = 1.0 / 1_073_741_824.0;
+pub use crate::camera::MIN_PIXEL_ANGLE;
 
-/// Refuses a view too narrow for `f64` camera rays ([`MIN_PIXEL_ANGLE`]).
+/// Refuses a view too narrow for `f64` camera rays at the final size
+/// ([`MIN_PIXEL_ANGLE`]; the loader checks the scene's own size, `--size`
+/// may shrink the pixels further).
 fn check_resolution(scene: &Scene, camera: &Camera) -> Result<(), LoadError> {
-    let h = f64::from(camera.height());
-    let fail = |key: &str, message: String| LoadError::Scene {
-        path: scene.path.clone(),
-        message: format!("camera.{key}: {message}"),
-    };
-    match camera.projection() {
-        Projection::Perspective { tan_half_fov: t } => {
-            // The smallest pixel angle is at the image corners.
-            let a = camera.aspect();
-            let corner = 1.0 / (1.0 + t * t * (1.0 + a * a));
-            let angle = 2.0 * t / h * corner;
-            if angle.is_nan() || angle < MIN_PIXEL_ANGLE {
-                return Err(fail(
-                    "fov_y",
-                    format!(
-                        "a field of view this narrow gives pixels {angle:.3e} rad wide at {}x{}, below the {MIN_PIXEL_ANGLE:.3e} rad that f64 camera rays resolve; widen it or render fewer pixels",
-                        camera.width(),
-                        camera.height()
-                    ),
-                ));
-            }
-        }
-        Projection::Orthographic { view_height } => {
-            let size = view_height / h;
-            let reach = camera.eye().abs().max_element() + view_height;
-            if size.is_nan() || size < MIN_PIXEL_ANGLE * reach {
-                return Err(fail(
-                    "view_height",
-                    format!(
-                        "a view {view_height:.3e} high at {:.3e} from the origin gives pixels {size:.3e} across at {}x{}, below the {MIN_PIXEL_ANGLE:.3e} of that distance that f64 camera rays resolve; enlarge it, move the scene nearer the origin or render fewer pixels",
-                        reach - view_height,
-                        camera.width(),
-                        camera.height()
-                    ),
-                ));
-            }
-        }
+    match crate::camera::resolution_problem(
+        camera.projection(),
+        camera.eye().abs().max_element(),
+        camera.width(),
+        camera.height(),
+    ) {
+        Some((key, message)) => Err(LoadError::Scene {
+            path: scene.path.clone(),
+            message: format!("camera.{key}: {message}"),
+        }),
+        None => Ok(()),
     }
-    Ok(())
 }
 
 /// Largest singular value of a 3×3 matrix (power iteration on MᵀM).
@@ -671,6 +638,7 @@ pub fn tessellate_within(
     )?;
     for obj in &scene.objects {
         let piece = object_piece(scene, obj, &camera, err_px, &mut out.warnings, &mut budget)?;
+        check_uv_precision(scene, obj, &piece, &mut out.warnings)?;
         append(scene, obj, piece, &mut out)?;
     }
     check_precision(scene, &mut out, &camera)?;
@@ -700,10 +668,76 @@ pub fn tessellate_within(
 /// above f32's smallest normal number (1.2e-38): (1e-10)³ = 1e-30.
 pub const MIN_EXTENT: f64 = 1e-10;
 
-/// The least number of f32 steps (at the largest coordinate of the scene
-/// or the eye) that the scene must span: below 2¹¹ the rounding of the
+/// The least number of f32 steps (at the largest coordinate of the scene's
+/// geometry) that the scene must span: below 2¹¹ the rounding of the
 /// stored positions moves vertices by more than 1/2048 of the scene.
 pub const MIN_EXTENT_STEPS: f64 = 2048.0;
+
+/// The most an f32 rounding of a texture coordinate may move a lookup, in
+/// texels, before a warning (1/64: a one-code difference at a full-contrast
+/// texel edge) and before the object is refused (1/4: a quarter of a texel,
+/// where the picture visibly shifts against POV-Ray's f64 lookups).
+pub const UV_WARN_TEXELS: f64 = 1.0 / 64.0;
+/// See [`UV_WARN_TEXELS`].
+pub const UV_REFUSE_TEXELS: f64 = 0.25;
+
+/// Half an f32 step at `x`.
+fn half_ulp32(x: f64) -> f64 {
+    #[expect(
+        clippy::cast_possible_truncation,
+        reason = "the f32 whose step is wanted"
+    )]
+    let f = x.abs() as f32;
+    f64::from(f.next_up() - f) * 0.5
+}
+
+/// Refuses (or warns about) uvs so large that their f32 rounding moves an
+/// image lookup by a sizeable part of a texel of the object's texture.
+fn check_uv_precision(
+    scene: &Scene,
+    obj: &Object,
+    piece: &Piece,
+    warnings: &mut Vec<String>,
+) -> Result<(), LoadError> {
+    let m = &scene.materials[usize::from(obj.material)];
+    let mut side = 0u32;
+    if let crate::shade::Pigment::Image(t) = &m.pigment {
+        side = side.max(t.width()).max(t.height());
+    }
+    if let Some(b) = &m.bump {
+        side = side.max(b.texture.width()).max(b.texture.height());
+    }
+    if side == 0 {
+        return Ok(());
+    }
+    let reach = piece
+        .uvs
+        .iter()
+        .map(|uv| f64::from(uv.abs().max_element()))
+        .fold(0.0f64, f64::max);
+    let texels = half_ulp32(reach) * f64::from(side);
+    let msg = format!(
+        "{}: its texture coordinates reach {reach:.6e}, where f32 rounds them by {texels:.3} of a texel of the {side}-texel image of material \"{}\"",
+        obj.label(),
+        m.name
+    );
+    if texels > UV_REFUSE_TEXELS {
+        return Err(LoadError::Key {
+            path: scene.path.clone(),
+            loc: obj.loc,
+            key: format!("objects[{}]", obj.index),
+            message: format!(
+                "{msg}, more than {UV_REFUSE_TEXELS}; keep the uvs near 0 (subtract whole repeats)"
+            ),
+        });
+    }
+    if texels > UV_WARN_TEXELS {
+        warnings.push(format!(
+            "{msg}: lookups differ from exact ones by up to that much"
+        ));
+    }
+    Ok(())
+}
 
 /// The least number of f32 steps an object must span at its own position
 /// (refused below; warned below [`MIN_EXTENT_STEPS`]): below 2⁸ rounding
@@ -727,7 +761,10 @@ fn check_precision(
     }
     let (lo, hi) = (to_f64(b.min), to_f64(b.max));
     let extent = (hi - lo).length();
-    let largest = lo.abs().max(hi.abs()).max(camera.eye().abs()).max_element();
+    // The geometry's own precision: the eye is f64 everywhere (the camera
+    // rays, the projection, the oracle), so its distance does not matter.
+    let _ = camera;
+    let largest = lo.abs().max(hi.abs()).max_element();
     let step = largest * f64::from(f32::EPSILON);
     let fail = |message: String| LoadError::Scene {
         path: scene.path.clone(),
@@ -740,7 +777,7 @@ fn check_precision(
     }
     if extent < MIN_EXTENT_STEPS * step {
         return Err(fail(format!(
-            "the scene spans {extent:.3e} units at {largest:.3e} from the origin: only {:.0} f32 steps, fewer than the {MIN_EXTENT_STEPS} needed to keep its vertices in place; move it (and the camera) nearer the origin",
+            "the scene spans {extent:.3e} units at {largest:.3e} from the origin: only {:.0} f32 steps, fewer than the {MIN_EXTENT_STEPS} needed to keep its vertices in place; move it nearer the origin",
             extent / step
         )));
     }

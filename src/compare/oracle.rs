@@ -36,6 +36,14 @@ pub const EDGE_TIE_MAX_PX: f64 = 1.0 / 64.0;
 /// apart, whatever the rounding; the rounding itself is ~10⁻¹³.
 pub const DEPTH_ERROR_MAX_REL: f64 = 1.0 / 1024.0;
 
+/// The largest depth difference a depth tie may have in all, relative to
+/// the depth, the depth format's resolution included. Surfaces a
+/// thousandth of their distance apart are two surfaces: where a depth
+/// format cannot resolve that (a 16-bit buffer beyond 64 times `near`, a
+/// 24-bit one beyond 16 000 times), the rasterizer's choice between them
+/// cannot be told from a bug, and the sample is unjudgeable.
+pub const DEPTH_TIE_MAX_REL: f64 = 1.0 / 1024.0;
+
 /// The largest error of a clip plane's position, relative to its distance
 /// (`near` or `far`), for a clip tie; ~10⁻¹³ in practice.
 pub const CLIP_ERROR_MAX_REL: f64 = 1.0 / 1024.0;
@@ -107,11 +115,12 @@ pub struct Footprint {
 pub struct Judged {
     /// The class.
     pub class: Class,
-    /// ε_edge used (px).
+    /// ε_edge applied (px; within its limit).
     pub edge_px: f64,
-    /// δ_t relative to the depth, where both triangles were inside.
+    /// δ_t applied, relative to the depth, where both triangles were
+    /// inside (within its limit).
     pub depth_rel: Option<f64>,
-    /// δ_near used (view-depth units).
+    /// δ_near applied (view-depth units; within its limit).
     pub clip: f64,
 }
 
@@ -408,12 +417,13 @@ impl<'a> Oracle<'a> {
         };
         let depth_tie = |capped: bool| {
             depth.is_some_and(|(diff, format, error, t)| {
-                let error = if capped {
-                    error.min(DEPTH_ERROR_MAX_REL * t)
+                if capped {
+                    let tol =
+                        (format + error.min(DEPTH_ERROR_MAX_REL * t)).min(DEPTH_TIE_MAX_REL * t);
+                    diff <= tol
                 } else {
-                    error
-                };
-                diff <= format + error
+                    diff <= format + error
+                }
             })
         };
 
@@ -443,12 +453,16 @@ impl<'a> Oracle<'a> {
             })
         };
 
+        // The tolerances as applied: each within its limit (a sample that
+        // would need more is unjudgeable, and counted as such).
         let judged = |class: Class| Judged {
             class,
-            edge_px: edge,
-            depth_rel: depth
-                .map(|(_, format, error, t)| (format + error) / t.max(f64::MIN_POSITIVE)),
-            clip,
+            edge_px: edge_ok,
+            depth_rel: depth.map(|(_, format, error, t)| {
+                let t = t.max(f64::MIN_POSITIVE);
+                ((format + error.min(DEPTH_ERROR_MAX_REL * t)) / t).min(DEPTH_TIE_MAX_REL)
+            }),
+            clip: clip.min(CLIP_ERROR_MAX_REL * cam.near().max(cam.far())),
         };
         if near_edge(edge_ok) {
             return judged(Class::EdgeTie);

@@ -11,8 +11,11 @@ use super::{Comparison, ImageStats, ImageTolerances, ShadingStats, Tolerances, V
 pub struct ToleranceLimits {
     /// Widest edge tie (px).
     pub edge_px: f64,
-    /// Largest error part of a depth tie, relative to the depth.
+    /// Largest depth difference of a depth tie, relative to the depth.
     pub depth_rel: f64,
+    /// Largest error part of a depth tie (beside the depth format's
+    /// resolution), relative to the depth.
+    pub depth_error_rel: f64,
     /// Largest clip-plane error, relative to the plane's distance.
     pub near_rel: f64,
 }
@@ -132,6 +135,7 @@ impl Report {
                 limits: ToleranceLimits {
                     edge_px: tol.edge_px_limit,
                     depth_rel: tol.depth_rel_limit,
+                    depth_error_rel: tol.depth_error_limit,
                     near_rel: tol.near_rel_limit,
                 },
                 gate_eps: tol.gate_eps,
@@ -214,7 +218,7 @@ impl Report {
         {
             let _ = write!(
                 o,
-                "  tolerance ({j} samples judged): edge ≤ {e:.4} px (limit {:.4}), depth ≤ {d:.1e} of t (error limit {:.1e}), near ≤ {n:.1e}, gate {:.1e}",
+                "  tolerance ({j} samples judged): edge ≤ {e:.4} px (limit {:.4}), depth ≤ {d:.1e} of t (limit {:.1e}), near ≤ {n:.1e}, gate {:.1e}",
                 t.limits.edge_px, t.limits.depth_rel, t.gate_eps
             );
         } else {

@@ -573,7 +573,7 @@ impl Loader<'_> {
     fn scene(mut self, root: &Table<'_, '_>) -> Result<Scene, LoadError> {
         let path = root.path().to_path_buf();
         let image = self.image(root)?;
-        let camera = self.camera(root)?;
+        let camera = self.camera(root, &image)?;
         let render = self.render(root)?;
         let lights = self.lights(root)?;
         let (materials, names) = self.materials(root)?;
@@ -652,7 +652,11 @@ impl Loader<'_> {
         })
     }
 
-    fn camera(&mut self, root: &Table<'_, '_>) -> Result<CameraSettings, LoadError> {
+    fn camera(
+        &mut self,
+        root: &Table<'_, '_>,
+        image: &ImageSettings,
+    ) -> Result<CameraSettings, LoadError> {
         let t = root
             .table("camera")?
             .ok_or_else(|| root.missing("camera"))?;
@@ -693,6 +697,15 @@ impl Loader<'_> {
                     format!("expected 0 < fov_y < 180 (degrees), got {}", num(fov.value)),
                 ));
             }
+            let tan_half_fov = (fov.value.to_radians() / 2.0).tan();
+            if let Some((_, m)) = crate::camera::resolution_problem(
+                crate::camera::Projection::Perspective { tan_half_fov },
+                eye.value.abs().max_element(),
+                image.width,
+                image.height,
+            ) {
+                return Err(t.err(&fov.span, "fov_y", m));
+            }
             ProjectionDesc::Perspective {
                 fov_y_deg: fov.value,
             }
@@ -712,6 +725,16 @@ impl Loader<'_> {
                     format!("expected > 0, got {}", num(vh.value)),
                 ));
             }
+            if let Some((_, m)) = crate::camera::resolution_problem(
+                crate::camera::Projection::Orthographic {
+                    view_height: vh.value,
+                },
+                eye.value.abs().max_element(),
+                image.width,
+                image.height,
+            ) {
+                return Err(t.err(&vh.span, "view_height", m));
+            }
             ProjectionDesc::Orthographic {
                 view_height: vh.value,
             }
@@ -728,7 +751,11 @@ impl Loader<'_> {
                 format!("{why}; the view direction is undefined"),
             ));
         };
-        if up.value.length() == 0.0 || f.cross(up.value).length() <= 1e-9 * up.value.length() {
+        // Scaled to its largest component: `[0, 1e308, 1e308]` is a
+        // direction (its length would overflow).
+        let big = up.value.abs().max_element();
+        let up_dir = if big > 0.0 { up.value / big } else { up.value };
+        if big == 0.0 || f.cross(up_dir).length() <= 1e-9 * up_dir.length() {
             return Err(t.err(
                 &up.span,
                 "up",

@@ -15,6 +15,7 @@ const ALLOWED: &[(&str, &[&str])] = &[
     ("analytic", &[]),
     ("input", &[]),
     ("budget", &[]),
+    ("cleanup", &[]),
     ("texture", &["budget", "color", "input", "math"]),
     ("image_io", &["color", "input"]),
     ("camera", &["math"]),
@@ -24,7 +25,7 @@ const ALLOWED: &[(&str, &[&str])] = &[
     (
         "scene",
         &[
-            "budget", "color", "input", "math", "options", "polygon", "shade", "texture",
+            "budget", "camera", "color", "input", "math", "options", "polygon", "shade", "texture",
         ],
     ),
     (
@@ -33,7 +34,15 @@ const ALLOWED: &[(&str, &[&str])] = &[
     ),
     (
         "tessellate",
-        &["analytic", "budget", "camera", "math", "scene", "tri_scene"],
+        &[
+            "analytic",
+            "budget",
+            "camera",
+            "math",
+            "scene",
+            "shade",
+            "tri_scene",
+        ],
     ),
     (
         "accel",

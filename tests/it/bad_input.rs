@@ -176,6 +176,10 @@ fn library_gives_the_same_errors() {
         // The extent of the transformed geometry.
         "73_scene_too_small.toml",
         "74_scene_too_far.toml",
+        // uvs against their texture's size, per object.
+        "80_uv_beyond_texture_precision.toml",
+        // An object's own extent in f32 steps.
+        "81_object_too_far.toml",
     ];
     for rel in corpus() {
         let cli = rendiff(&["plan", &rel]);

@@ -329,3 +329,56 @@ fn shading_is_bit_identical_where_both_see_the_same_triangle() {
     }
     eprintln!("{text}");
 }
+
+/// Controls written against the verdict from outside (each once passed
+/// with a visibly wrong image): what the rasterizer gets wrong through its
+/// chosen approximation must fail the verdict, not pass as ties.
+#[test]
+fn approximations_that_lose_surfaces_or_shadows_fail() {
+    use rendiff::options::{DepthFormat, ShadowMode};
+    let path = |n: &str| crate::util::root().join(format!("tests/data/controls/{n}.toml"));
+    let verdict = |name: &str, ov: Overrides| {
+        let job = rendiff::Prepared::load(&path(name), &ov).unwrap();
+        diff::diff(
+            &job,
+            name,
+            &Side::Backend(Backend::Raster),
+            &Side::Backend(Backend::Ray),
+        )
+        .unwrap()
+        .report
+    };
+    // Shadow rays: the fence's shadow is the same in both.
+    assert!(verdict("thin_fence", Overrides::default()).passed());
+    // A 256² shadow map loses most slats: 10 % of the pixels. (It passed as
+    // 8 044 shadow-boundary ties when one frame's boundary was enough.)
+    let r = verdict(
+        "thin_fence",
+        Overrides {
+            shadows: Some(ShadowMode::Map(256)),
+            ..Overrides::default()
+        },
+    );
+    assert!(
+        !r.passed() && r.shading.over_threshold > 1000,
+        "{}",
+        r.summary()
+    );
+    // f32 depth resolves the picture in front of the wall.
+    assert!(verdict("walls_gap", Overrides::default()).passed());
+    // 16-bit depth cannot: the picture vanishes behind the wall. Not a depth
+    // tie (the two are a fifth of their depth apart): unjudgeable.
+    let r = verdict(
+        "walls_gap",
+        Overrides {
+            depth: Some(DepthFormat::U16),
+            ..Overrides::default()
+        },
+    );
+    let v = r.visibility.unwrap();
+    assert!(
+        !r.passed() && v.unjudgeable > 1000 && v.depth_tie == 0,
+        "{}",
+        r.summary()
+    );
+}
