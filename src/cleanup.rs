@@ -79,17 +79,21 @@ impl Drop for ChildGuard {
     }
 }
 
-/// Terminates every registered child (SIGTERM) and removes every
-/// registered temporary; returns how many of each. For a signal handler
-/// that is about to exit.
+/// Kills every registered child (SIGKILL: POV-Ray can take seconds to
+/// act on SIGTERM, and it writes only into rendiff's scratch folder, which
+/// goes next), then removes every registered temporary; returns how many
+/// of each. For a signal handler that is about to exit. (A child is
+/// unregistered right after it is reaped, so the window in which its
+/// process id could be reused by another process is the drop of a guard.)
 pub fn interrupted() -> (usize, usize) {
+    INTERRUPTED.store(true, std::sync::atomic::Ordering::SeqCst);
     let r = registry();
     for (_, pid) in &r.children {
         if let Some(pid) = i32::try_from(*pid)
             .ok()
             .and_then(rustix::process::Pid::from_raw)
         {
-            let _ = rustix::process::kill_process(pid, rustix::process::Signal::TERM);
+            let _ = rustix::process::kill_process(pid, rustix::process::Signal::KILL);
         }
     }
     for (_, path) in &r.temps {
@@ -100,6 +104,15 @@ pub fn interrupted() -> (usize, usize) {
         }
     }
     (r.children.len(), r.temps.len())
+}
+
+static INTERRUPTED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Whether [`interrupted`] has run: what fails after it (a POV-Ray child it
+/// killed) is the interruption, not an error to report.
+#[must_use]
+pub fn is_interrupted() -> bool {
+    INTERRUPTED.load(std::sync::atomic::Ordering::SeqCst)
 }
 
 /// The temporaries registered now (for tests).

@@ -205,16 +205,10 @@ fn produce(job: &Prepared, side: &Side, max_depth: u32) -> Result<(Output, Optio
                     .find(|r| r.variant == variant)
                     .or_else(|| refs.first())
                     .ok_or_else(|| Error::Usage("no POV-Ray reference for this scene".into()))?;
-                let work = std::env::temp_dir().join(format!("rendiff-pov-{}", std::process::id()));
-                std::fs::create_dir_all(&work).map_err(|source| image_io::ImageIoError::Io {
-                    path: work.clone(),
-                    source,
-                })?;
-                let img =
-                    golden::render(&job.scene, r, &work).map_err(|e| Error::Usage(e.to_string()));
-                let _ = std::fs::remove_dir_all(&work);
-                img?
+                golden::render(&job.scene, r).map_err(|e| Error::Usage(e.to_string()))?
             } else {
+                let _lock = golden::GoldenLock::shared(golden_dir)
+                    .map_err(|e| Error::Usage(e.to_string()))?;
                 let path = golden::reference_path(golden_dir, &job.scene, variant);
                 if !path.exists() {
                     return Err(Error::Usage(format!(
@@ -223,7 +217,12 @@ fn produce(job: &Prepared, side: &Side, max_depth: u32) -> Result<(Output, Optio
                         job.scene.path.display()
                     )));
                 }
-                image_io::read_png_linear(&path)?
+                let cam = &job.tri.camera;
+                image_io::read_png_linear_within(
+                    &path,
+                    Some((cam.width(), cam.height())),
+                    &job.budget,
+                )?
             };
             Output::Image {
                 width: img.width,
@@ -252,18 +251,14 @@ fn produce(job: &Prepared, side: &Side, max_depth: u32) -> Result<(Output, Optio
             return Ok((Output::Frame(r.frame, r.time_ms), note));
         }
         Side::Image(p) => {
-            let img = image_io::read_png_linear(p)?;
+            // The header's size is compared with the scene's before the
+            // image is decoded (a PNG may claim 60000×60000 in 3 MB).
             let cam = &job.tri.camera;
-            if (img.width, img.height) != (cam.width(), cam.height()) {
-                return Err(Error::Usage(format!(
-                    "{}: the image is {}x{} but the scene renders {}x{} (use --size)",
-                    p.display(),
-                    img.width,
-                    img.height,
-                    cam.width(),
-                    cam.height()
-                )));
-            }
+            let img = image_io::read_png_linear_within(
+                p,
+                Some((cam.width(), cam.height())),
+                &job.budget,
+            )?;
             Output::Image {
                 width: img.width,
                 height: img.height,

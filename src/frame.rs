@@ -159,9 +159,13 @@ impl Frame {
             source,
         })?;
         let (w, h) = (self.sample_width(), self.sample_height());
-        image_io::write_pfm(&dir.join("depth.pfm"), w, h, &self.depth)?;
+        let [depth, id, flags] = GBUFFER_FILES;
+        image_io::write_pfm(&dir.join(depth), w, h, &self.depth)?;
         let ids: Vec<u32> = self.id.iter().map(|&i| i.wrapping_add(1)).collect();
-        image_io::write_png_u32(&dir.join("id.png"), w, h, &ids)?;
-        image_io::write_png_u32(&dir.join("flags.png"), w, h, &self.flags)
+        image_io::write_png_u32(&dir.join(id), w, h, &ids)?;
+        image_io::write_png_u32(&dir.join(flags), w, h, &self.flags)
     }
 }
+
+/// The files [`Frame::write_gbuffer`] writes into its folder.
+pub const GBUFFER_FILES: [&str; 3] = ["depth.pfm", "id.png", "flags.png"];

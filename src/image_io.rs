@@ -1,9 +1,11 @@
-//! Writing and reading images, always through a temporary file in the
-//! destination folder that is renamed into place: an interrupted run never
-//! leaves a half-written file, and an existing file is either the old one
-//! or the complete new one.
+//! Writing and reading images. Every file rendiff writes goes through
+//! [`write_atomic`]: a regular file is written to an unpredictable
+//! temporary name in its own folder (created exclusively, `O_EXCL`, by the
+//! `tempfile` crate) and renamed over the target only when complete, so an
+//! interrupted run never leaves a half-written file and a planted link at
+//! a predictable name cannot redirect the write; what is not a regular
+//! file is never renamed over (see [`write_atomic`]).
 
-use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
@@ -30,44 +32,145 @@ pub enum ImageIoError {
         /// What failed.
         message: String,
     },
+    /// The target of a write is something rendiff does not write over.
+    #[error("{}: {message}", .path.display())]
+    Refused {
+        /// The target.
+        path: PathBuf,
+        /// Why.
+        message: String,
+    },
 }
 
-/// Writes a file atomically: `write` fills a temporary file in the same
-/// folder, which is flushed, synced and renamed over `path`.
+/// Where a write goes.
+#[derive(Debug, PartialEq, Eq)]
+pub enum OutputTarget {
+    /// A regular file (or none yet) at this path: replaced atomically.
+    File(PathBuf),
+    /// A FIFO or a character device the user named (`/dev/null`,
+    /// `/dev/stdout`, a pipe): written straight into, never replaced.
+    Stream(PathBuf),
+}
+
+/// What writing to `path` means, or why rendiff will not write there.
+///
+/// * a regular file, or nothing yet: replaced (created) atomically;
+/// * a symbolic link to a regular file: the link is followed, and the file
+///   it points to is replaced atomically (the link stays a link);
+/// * a FIFO or a character device, directly or through a link: written
+///   straight into (renaming a file over `/dev/null` would replace the
+///   device node);
+/// * a link to nowhere, a folder, a block device or a socket: refused.
 ///
 /// # Errors
 ///
-/// [`ImageIoError::Io`] (the temporary file is removed).
-pub fn write_atomic<F>(path: &Path, write: F) -> Result<(), ImageIoError>
-where
-    F: FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
-{
+/// [`ImageIoError::Refused`] or the I/O error of looking at it.
+pub fn output_target(path: &Path) -> Result<OutputTarget, ImageIoError> {
+    use std::os::unix::fs::FileTypeExt;
+    let refused = |message: &str| ImageIoError::Refused {
+        path: path.to_path_buf(),
+        message: message.to_string(),
+    };
     let io = |source| ImageIoError::Io {
         path: path.to_path_buf(),
         source,
     };
-    let dir = path
+    let link = match std::fs::symlink_metadata(path) {
+        Ok(m) => m.file_type().is_symlink(),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            return Ok(OutputTarget::File(path.to_path_buf()));
+        }
+        Err(e) => return Err(io(e)),
+    };
+    let m = match std::fs::metadata(path) {
+        Ok(m) => m,
+        Err(e) if link && e.kind() == std::io::ErrorKind::NotFound => {
+            return Err(refused(
+                "is a symbolic link to nothing; rendiff does not write through it",
+            ));
+        }
+        Err(e) => return Err(io(e)),
+    };
+    let t = m.file_type();
+    if t.is_fifo() || t.is_char_device() {
+        return Ok(OutputTarget::Stream(path.to_path_buf()));
+    }
+    if t.is_dir() {
+        return Err(refused("is a folder; expected a file name"));
+    }
+    if !t.is_file() {
+        return Err(refused(
+            "is not a regular file, a FIFO or a character device; rendiff does not write over it",
+        ));
+    }
+    if link {
+        return std::fs::canonicalize(path)
+            .map(OutputTarget::File)
+            .map_err(io);
+    }
+    Ok(OutputTarget::File(path.to_path_buf()))
+}
+
+/// Writes a file: `write` fills it, then it is put in place as
+/// [`output_target`] says — for a regular file, a temporary file created
+/// exclusively under an unpredictable name in the same folder, flushed,
+/// synced and renamed over the target (registered for removal if the run
+/// is interrupted before the rename); for a FIFO or a device, the stream
+/// itself.
+///
+/// # Errors
+///
+/// [`ImageIoError`] (the temporary file is removed).
+pub fn write_atomic<F>(path: &Path, write: F) -> Result<(), ImageIoError>
+where
+    F: FnOnce(&mut dyn Write) -> std::io::Result<()>,
+{
+    let io = |p: &Path, source| ImageIoError::Io {
+        path: p.to_path_buf(),
+        source,
+    };
+    let target = match output_target(path)? {
+        OutputTarget::Stream(p) => {
+            let f = std::fs::OpenOptions::new()
+                .write(true)
+                .open(&p)
+                .map_err(|e| io(&p, e))?;
+            let mut w = BufWriter::new(f);
+            return write(&mut w)
+                .and_then(|()| w.flush())
+                .map_err(|e| io(&p, e));
+        }
+        OutputTarget::File(p) => p,
+    };
+    let dir = target
         .parent()
         .filter(|p| !p.as_os_str().is_empty())
         .unwrap_or(Path::new("."));
-    let name = path
+    let name = target
         .file_name()
         .map_or_else(|| "out".into(), |n| n.to_string_lossy().into_owned());
-    let tmp = dir.join(format!(".{name}.{}.tmp", std::process::id()));
+    let prefix = format!(".{name}.");
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(&prefix).suffix(".tmp");
+    // A new file gets rw-r--r--; a replaced one keeps its permissions.
+    let perms = std::fs::metadata(&target).map_or_else(
+        |_| std::os::unix::fs::PermissionsExt::from_mode(0o644),
+        |m| m.permissions(),
+    );
+    builder.permissions(perms);
+    let tmp = builder.tempfile_in(dir).map_err(|e| io(&target, e))?;
+    let _guard = crate::cleanup::TempGuard::new(tmp.path());
     let result = (|| {
-        let file = File::create(&tmp)?;
-        let mut w = BufWriter::new(file);
+        let mut w = BufWriter::new(tmp.as_file());
         write(&mut w)?;
         w.flush()?;
-        w.get_ref().sync_all()?;
         drop(w);
+        tmp.as_file().sync_all()?;
         pause_before_rename();
-        std::fs::rename(&tmp, path)
+        Ok(())
     })();
-    if let Err(e) = result {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(io(e));
-    }
+    result.map_err(|e| io(&target, e))?;
+    tmp.persist(&target).map_err(|e| io(&target, e.error))?;
     Ok(())
 }
 
@@ -247,11 +350,45 @@ pub struct LinearImage {
 ///
 /// [`ImageIoError`] when the file is unreadable or not a PNG.
 pub fn read_png_linear(path: &Path) -> Result<LinearImage, ImageIoError> {
-    let bytes = crate::input::read_file(path).map_err(|source| ImageIoError::Io {
+    read_png_linear_within(path, None, &crate::budget::Budget::default())
+}
+
+/// Bytes a decoded image holds per pixel beside its decode buffer (the
+/// linear colour, three f32).
+const LINEAR_BYTES_PER_PIXEL: u64 = 12;
+
+/// Reads a PNG as [`read_png_linear`] does, checking its header before
+/// anything is decoded: its size must be `expect` when given (an image
+/// that claims 60000×60000 against a 320×240 scene is refused from its 33
+/// header bytes), and its decoded size must fit `budget` (reserved while
+/// decoding, released after: the caller keeps the result).
+///
+/// # Errors
+///
+/// [`ImageIoError`] when the file is unreadable, not a PNG, of another size
+/// than expected, or too large for the budget.
+pub fn read_png_linear_within(
+    path: &Path,
+    expect: Option<(u32, u32)>,
+    budget: &crate::budget::Budget,
+) -> Result<LinearImage, ImageIoError> {
+    let size = crate::input::regular_file_size(path).map_err(|source| ImageIoError::Io {
         path: path.to_path_buf(),
         source,
     })?;
-    decode_png_linear(path, &bytes)
+    budget
+        .reserve(size, || {
+            format!("reading the {} image", crate::budget::human(size))
+        })
+        .map_err(|e| png_err(path, e))?;
+    let result = crate::input::read_file(path)
+        .map_err(|source| ImageIoError::Io {
+            path: path.to_path_buf(),
+            source,
+        })
+        .and_then(|bytes| decode_png_linear_within(path, &bytes, expect, budget));
+    budget.release(size);
+    result
 }
 
 /// Decodes PNG bytes as [`read_png_linear`] does.
@@ -260,9 +397,57 @@ pub fn read_png_linear(path: &Path) -> Result<LinearImage, ImageIoError> {
 ///
 /// [`ImageIoError::Png`] when the bytes are not a PNG.
 pub fn decode_png_linear(path: &Path, bytes: &[u8]) -> Result<LinearImage, ImageIoError> {
-    let mut dec = png::Decoder::new(std::io::Cursor::new(bytes));
+    decode_png_linear_within(path, bytes, None, &crate::budget::Budget::default())
+}
+
+/// [`decode_png_linear`] with the header checks of
+/// [`read_png_linear_within`]; the decoder's own allocations (its chunks,
+/// an ICC profile it inflates) are capped at what the budget has left.
+///
+/// # Errors
+///
+/// As [`read_png_linear_within`].
+pub fn decode_png_linear_within(
+    path: &Path,
+    bytes: &[u8],
+    expect: Option<(u32, u32)>,
+    budget: &crate::budget::Budget,
+) -> Result<LinearImage, ImageIoError> {
+    let limits = png::Limits {
+        bytes: usize::try_from(budget.remaining()).unwrap_or(usize::MAX),
+    };
+    let mut dec = png::Decoder::new_with_limits(std::io::Cursor::new(bytes), limits);
     dec.set_transformations(png::Transformations::EXPAND);
-    let mut reader = dec.read_info().map_err(|e| png_err(path, e))?;
+    let reader = dec.read_info().map_err(|e| png_err(path, e))?;
+    let info = reader.info();
+    let (w, h) = (info.width, info.height);
+    if let Some((ew, eh)) = expect
+        && (w, h) != (ew, eh)
+    {
+        return Err(png_err(
+            path,
+            format!("the image is {w}x{h} but the scene renders {ew}x{eh} (use --size)"),
+        ));
+    }
+    let decoded = reader
+        .output_buffer_size()
+        .ok_or_else(|| png_err(path, "image too large"))? as u64;
+    let need = decoded + u64::from(w) * u64::from(h) * LINEAR_BYTES_PER_PIXEL;
+    budget
+        .reserve(need, || format!("decoding the {w}x{h} image"))
+        .map_err(|e| png_err(path, e))?;
+    let result = decode_frame(path, reader);
+    budget.release(decoded);
+    if result.is_err() {
+        budget.release(need - decoded);
+    }
+    result
+}
+
+fn decode_frame(
+    path: &Path,
+    mut reader: png::Reader<std::io::Cursor<&[u8]>>,
+) -> Result<LinearImage, ImageIoError> {
     let info = reader.info();
     let gamma_one = info
         .gama_chunk

@@ -344,9 +344,19 @@ fn superellipsoid_f(e: f64, n: f64, d: DVec3) -> f64 {
     a.powf(e / n) + d.z.abs().powf(2.0 / n)
 }
 
-/// The surface point along unit direction `d`.
+/// The surface point along direction `d`. F is evaluated on `d` scaled to
+/// a largest component of 1 (F is homogeneous of degree 2/n, so
+/// `F(d) = m^(2/n)·F(d/m)`): there F ≥ 1, where on the unit direction the
+/// powers 2/e and 2/n of components below 1 underflow together for small
+/// exponents (e = 0.001: 0.7^2000 = 0) and F = 0 put the point at
+/// infinity.
 fn superellipsoid_point(e: f64, n: f64, d: DVec3) -> DVec3 {
-    d * superellipsoid_f(e, n, d).powf(-n / 2.0)
+    let m = d.abs().max_element();
+    if m == 0.0 || !m.is_finite() {
+        return DVec3::ZERO;
+    }
+    let u = d / m;
+    u * superellipsoid_f(e, n, u).powf(-n / 2.0)
 }
 
 /// Unit gradient of F at `p` (`None` where it is not finite: a cusp).
@@ -407,25 +417,28 @@ fn superellipsoid_grid(e: f64, n: f64, segments: u32) -> (Vec<DVec3>, Vec<[u32; 
 /// barycentric grid of `samples_per_side` steps, maximised.
 #[must_use]
 pub fn superellipsoid_chord_error(e: f64, n: f64, segments: u32, samples_per_side: u32) -> f64 {
+    use rayon::prelude::*;
     let (pts, tris) = superellipsoid_grid(e, n, segments);
     let k = f64::from(samples_per_side.max(2));
-    let mut worst: f64 = 0.0;
-    for t in &tris {
-        let [a, b, c] = t.map(|i| pts[i as usize]);
-        for i in 0..=samples_per_side {
-            for j in 0..=(samples_per_side - i) {
-                let (u, v) = (f64::from(i) / k, f64::from(j) / k);
-                let m = a + (b - a) * u + (c - a) * v;
-                let len = m.length();
-                if len == 0.0 {
-                    continue;
+    tris.par_iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|i| pts[i as usize]);
+            let mut worst: f64 = 0.0;
+            for i in 0..=samples_per_side {
+                for j in 0..=(samples_per_side - i) {
+                    let (u, v) = (f64::from(i) / k, f64::from(j) / k);
+                    let m = a + (b - a) * u + (c - a) * v;
+                    let len = m.length();
+                    if len == 0.0 {
+                        continue;
+                    }
+                    let s = superellipsoid_point(e, n, m / len);
+                    worst = worst.max((s.length() - len).abs());
                 }
-                let s = superellipsoid_point(e, n, m / len);
-                worst = worst.max((s.length() - len).abs());
             }
-        }
-    }
-    worst
+            worst
+        })
+        .reduce(|| 0.0, f64::max)
 }
 
 fn superellipsoid_piece(e: f64, n: f64, segments: u32) -> Piece {
@@ -543,32 +556,125 @@ fn polygon_piece(poly: &crate::scene::PolygonShape) -> Piece {
     p
 }
 
+/// The most segments a superellipsoid's search measures: a grid of 512
+/// segments (262 000 triangles) meets the default half-pixel error of
+/// every exponent pair that converges (<0.1, 4> at 64×48 needs 68; the
+/// count grows as the square root of the image size, so about 520 at
+/// 3840×2160 only for that pinched shape).
+pub const SUPERELLIPSOID_MAX_SEGMENTS: u32 = 512;
+
+/// Triangles the superellipsoid searches of one scene may measure in all
+/// (each at 28 samples, about 80 ns a sample on one core here, so about
+/// 5 s of work at most): past it a search keeps the count it has (one
+/// that meets the bound, if it found one), which costs minimality, never
+/// the bound.
+pub const SEARCH_WORK_TRIANGLES: u64 = 1 << 21;
+
+/// Why a segment search stopped short of the error bound.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Shortfall {
+    /// The error at the count chosen.
+    error: f64,
+    /// Why the search stopped.
+    why: &'static str,
+}
+
+/// The search for a curved object's segment count.
+struct Search<'w> {
+    /// The largest count measured.
+    max: u32,
+    /// Triangles still to measure (shared by a scene's searches).
+    work: &'w mut u64,
+    /// Whether the error is measured on the grid (cost n² triangles), or
+    /// known in closed form (free).
+    measured: bool,
+}
+
 /// Segment count for a curved object: fixed, or the smallest meeting the
-/// error bound (doubling, then bisection), capped at [`MAX_SEGMENTS`].
-fn choose_segments(fixed: Option<u32>, tolerance: f64, error: impl Fn(u32) -> f64) -> (u32, bool) {
+/// error bound (doubling, then bisection). A doubling that does not halve
+/// the error twice in a row is no longer converging (the error then lies
+/// in an edge or cusp the parameterisation does not resolve), and the
+/// search stops there, as at `search.max` or the end of its work; it then
+/// keeps the count with the least error and says why.
+fn choose_segments(
+    fixed: Option<u32>,
+    tolerance: f64,
+    search: &mut Search<'_>,
+    error: impl Fn(u32) -> f64,
+) -> (u32, Option<Shortfall>) {
     if let Some(n) = fixed {
-        return (n, false);
+        return (n, None);
     }
-    let mut hi = 8u32;
-    while error(hi) > tolerance {
-        if hi >= MAX_SEGMENTS {
-            return (MAX_SEGMENTS, true);
+    let measured = search.measured;
+    let work = |n: u32, w: &mut u64| -> bool {
+        let cost = if measured {
+            u64::from(n) * u64::from(n)
+        } else {
+            0
+        };
+        if cost > *w {
+            return false;
         }
-        hi = (hi * 2).min(MAX_SEGMENTS);
+        *w -= cost;
+        true
+    };
+    let mut hi = 8u32.min(search.max);
+    let mut best = (hi, f64::INFINITY);
+    let mut slow = 0;
+    loop {
+        if !work(hi, search.work) {
+            return (
+                best.0,
+                Some(Shortfall {
+                    error: best.1,
+                    why: "the scene's segment searches reached their work bound",
+                }),
+            );
+        }
+        let e = error(hi);
+        if e <= tolerance {
+            break;
+        }
+        slow = if e > 0.5 * best.1 { slow + 1 } else { 0 };
+        if e < best.1 {
+            best = (hi, e);
+        }
+        if slow >= 2 {
+            return (
+                best.0,
+                Some(Shortfall {
+                    error: best.1,
+                    why: "doubling the segments no longer halves the error",
+                }),
+            );
+        }
+        if hi >= search.max {
+            return (
+                best.0,
+                Some(Shortfall {
+                    error: best.1,
+                    why: "the most segments the search measures",
+                }),
+            );
+        }
+        hi = (hi * 2).min(search.max);
     }
     let mut lo = (hi / 2).max(3);
-    if error(lo) <= tolerance {
-        return (lo, false);
+    if work(lo, search.work) && error(lo) <= tolerance {
+        return (lo, None);
     }
     while hi - lo > 1 {
         let mid = (lo + hi) / 2;
+        if !work(mid, search.work) {
+            break;
+        }
         if error(mid) <= tolerance {
             hi = mid;
         } else {
             lo = mid;
         }
     }
-    (hi, false)
+    (hi, None)
 }
 
 /// Tessellates a scene into the `TriScene` every backend renders.
@@ -636,8 +742,17 @@ pub fn tessellate_within(
             "a {w}x{h} image with {n}x{n} samples ({samples} samples at {BYTES_PER_SAMPLE} B)"
         ),
     )?;
+    let mut work = SEARCH_WORK_TRIANGLES;
     for obj in &scene.objects {
-        let piece = object_piece(scene, obj, &camera, err_px, &mut out.warnings, &mut budget)?;
+        let piece = object_piece(
+            scene,
+            obj,
+            &camera,
+            err_px,
+            &mut out.warnings,
+            &mut budget,
+            &mut work,
+        )?;
         check_uv_precision(scene, obj, &piece, &mut out.warnings)?;
         append(scene, obj, piece, &mut out)?;
     }
@@ -821,6 +936,7 @@ fn object_piece(
     err_px: f64,
     warnings: &mut Vec<String>,
     budget: &mut Budget<'_>,
+    work: &mut u64,
 ) -> Result<Piece, LoadError> {
     // A grid of n segments around and n/2 rings has n² triangles (less the
     // poles): counted before it is built.
@@ -839,32 +955,41 @@ fn object_piece(
         let z = (camera.view_depth(c) - r).max(camera.near());
         err_px / camera.max_pixels_per_unit(z) / stretch
     };
-    let _ = scene;
+    let label = obj.label();
+    let mut shortfall = |short: Option<Shortfall>, n: u32, tol: f64| {
+        if let Some(Shortfall { error, why }) = short {
+            warnings.push(format!(
+                "{label}: the tessellation error stays at {:.3} px (tessellation_error is {err_px} px) with {n} segments: {why}; set `tessellation` to choose the count",
+                error / tol * err_px
+            ));
+        }
+    };
     Ok(match &obj.shape {
         Shape::Sphere { center, radius } => {
             let tol = object_tolerance(*center, *radius);
-            let (n, capped) =
-                choose_segments(obj.tessellation, tol, |n| sphere_chord_error(*radius, n));
-            if capped {
-                warnings.push(format!(
-                    "{}: {MAX_SEGMENTS} segments do not reach the tessellation error; capped",
-                    obj.label()
-                ));
-            }
+            let mut search = Search {
+                max: MAX_SEGMENTS,
+                work,
+                measured: false,
+            };
+            let (n, short) = choose_segments(obj.tessellation, tol, &mut search, |n| {
+                sphere_chord_error(*radius, n)
+            });
+            shortfall(short, n, tol);
             grid(n, budget)?;
             sphere_piece(*center, *radius, n)
         }
         Shape::Superellipsoid { e, n: ns } => {
             let tol = SUPERELLIPSOID_MARGIN * object_tolerance(DVec3::ZERO, 3f64.sqrt());
-            let (n, capped) = choose_segments(obj.tessellation, tol, |k| {
+            let mut search = Search {
+                max: SUPERELLIPSOID_MAX_SEGMENTS,
+                work,
+                measured: true,
+            };
+            let (n, short) = choose_segments(obj.tessellation, tol, &mut search, |k| {
                 superellipsoid_chord_error(*e, *ns, k, SUPERELLIPSOID_SAMPLES)
             });
-            if capped {
-                warnings.push(format!(
-                    "{}: {MAX_SEGMENTS} segments do not reach the tessellation error; capped",
-                    obj.label()
-                ));
-            }
+            shortfall(short, n, tol);
             grid(n, budget)?;
             superellipsoid_piece(*e, *ns, n)
         }
@@ -1266,8 +1391,14 @@ mod tests {
     #[test]
     fn segment_choice_is_minimal() {
         let tol = 1e-3;
-        let (n, capped) = choose_segments(None, tol, |n| sphere_chord_error(1.0, n));
-        assert!(!capped);
+        let mut work = SEARCH_WORK_TRIANGLES;
+        let mut search = Search {
+            max: MAX_SEGMENTS,
+            work: &mut work,
+            measured: false,
+        };
+        let (n, short) = choose_segments(None, tol, &mut search, |n| sphere_chord_error(1.0, n));
+        assert_eq!(short, None);
         assert!(sphere_chord_error(1.0, n) <= tol);
         assert!(sphere_chord_error(1.0, n - 1) > tol);
     }

@@ -284,12 +284,7 @@ pub fn decade(v: f64) -> String {
     }
 }
 
-fn esc(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
-        .replace('"', "&quot;")
-}
+use crate::escape::html as esc;
 
 /// The HTML page of one scene: images, maps and metrics, with relative
 /// links only (viewable from the file system, no server).
@@ -331,7 +326,7 @@ pub fn scene_html(r: &Report, images: &[(&str, &str)]) -> String {
         let _ = writeln!(
             o,
             "<figure{class}><img src=\"{}\" alt=\"{}\" style=\"zoom:{z}\"><figcaption>{}</figcaption></figure>",
-            esc(file),
+            esc(&crate::escape::href(file)),
             esc(label),
             esc(label)
         );
@@ -358,7 +353,7 @@ pub fn index_html(entries: &[(Report, String)]) -> String {
             .map_or_else(|| "–".to_string(), |v| v.real.to_string());
         let _ = writeln!(
             o,
-            "<tr><td><a href=\"{d}/index.html\">{}</a></td><td>{} / {}</td><td class=\"{}\">{}</td><td>{real}</td><td>{:.2e}</td><td>{}</td><td><a href=\"{d}/index.html\"><img class=\"thumb\" src=\"{d}/composite.png\" alt=\"composite of {}\"></a></td></tr>",
+            "<tr><td><a href=\"{page}\">{}</a></td><td>{} / {}</td><td class=\"{}\">{}</td><td>{real}</td><td>{:.2e}</td><td>{}</td><td><a href=\"{page}\"><img class=\"thumb\" src=\"{thumb}\" alt=\"composite of {}\"></a></td></tr>",
             esc(&r.scene),
             esc(&r.a),
             esc(&r.b),
@@ -367,7 +362,8 @@ pub fn index_html(entries: &[(Report, String)]) -> String {
             r.shading.max,
             r.image.max_channel_8bit,
             esc(&r.scene),
-            d = esc(dir)
+            page = esc(&crate::escape::href(&format!("{dir}/index.html"))),
+            thumb = esc(&crate::escape::href(&format!("{dir}/composite.png")))
         );
     }
     o.push_str("</table>\n</body></html>\n");

@@ -51,6 +51,9 @@ pub enum GoldenError {
     /// A file could not be written or read.
     #[error(transparent)]
     Image(#[from] image_io::ImageIoError),
+    /// The scene cannot be written as SDL.
+    #[error(transparent)]
+    Export(#[from] super::ExportError),
     /// The metadata file is malformed.
     #[error("{}: {message}", .path.display())]
     Metadata {
@@ -156,7 +159,7 @@ pub fn references(scene: &Scene, tri: &TriScene) -> Result<Vec<Reference>, Golde
                     max_depth,
                     abridged: false,
                 },
-            );
+            )?;
             let mut image_hashes = Vec::new();
             for img in &e.images {
                 let bytes = crate::input::read_file(&img.source).map_err(|source| {
@@ -199,32 +202,56 @@ pub fn povray_version() -> Result<String, GoldenError> {
         .ok_or(GoldenError::NoPovray)
 }
 
-/// Renders a reference with POV-Ray in `work` (a scratch folder), from the
-/// scene's folder, and returns it averaged to the scene's size.
+/// The name of the scene's folder inside a render's scratch folder: a
+/// link to it, POV-Ray's library path, so the image names of the SDL
+/// (relative to the scene's folder) resolve without the folder's own path
+/// ever reaching POV-Ray's option parser.
+const SCENE_LINK: &str = "rendiff-scene-dir";
+
+/// Renders a reference with POV-Ray and returns it averaged to the
+/// scene's size.
+///
+/// POV-Ray runs in a fresh scratch folder (removed afterwards, and on
+/// SIGINT/SIGTERM through [`crate::cleanup`], which also stops POV-Ray)
+/// with an argument vector of fixed, simple names: `+Irendiff.pov
+/// +Orendiff.png +Lrendiff-scene-dir`, where `rendiff-scene-dir` is a
+/// link to the scene's folder. No path of the user's reaches POV-Ray's
+/// command line, whose option parser splits values at spaces.
 ///
 /// # Errors
 ///
 /// [`GoldenError`] if POV-Ray is missing or fails, or files cannot be written.
-pub fn render(scene: &Scene, r: &Reference, work: &Path) -> Result<LinearImage, GoldenError> {
-    let name = scene.name();
-    let pov = work.join(format!("{name}{}.pov", r.variant.suffix()));
-    let png = work.join(format!("{name}{}.raw.png", r.variant.suffix()));
+pub fn render(scene: &Scene, r: &Reference) -> Result<LinearImage, GoldenError> {
+    let io = |path: &Path, source| image_io::ImageIoError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let work = tempfile::Builder::new()
+        .prefix("rendiff-pov-")
+        .tempdir()
+        .map_err(|e| io(&std::env::temp_dir(), e))?;
+    let _guard = crate::cleanup::TempGuard::new(work.path());
+    let dir = work.path();
+    let pov = dir.join("rendiff.pov");
+    let png = dir.join("rendiff.png");
     image_io::write_atomic(&pov, |f| {
         std::io::Write::write_all(f, r.export.text.as_bytes())
     })?;
     for img in &r.export.images {
-        img.materialise(work)?;
+        img.materialise(dir)?;
     }
-    let (w, h) = r.export.render_size;
     let scene_dir = scene
         .path
         .parent()
         .filter(|p| !p.as_os_str().is_empty())
-        .map_or_else(|| PathBuf::from("."), Path::to_path_buf);
-    let out = Command::new(POVRAY)
-        .current_dir(&scene_dir)
-        .arg(format!("+I{}", pov.display()))
-        .arg(format!("+O{}", png.display()))
+        .unwrap_or(Path::new("."));
+    let scene_dir = std::fs::canonicalize(scene_dir).map_err(|e| io(scene_dir, e))?;
+    std::os::unix::fs::symlink(&scene_dir, dir.join(SCENE_LINK))
+        .map_err(|e| io(&dir.join(SCENE_LINK), e))?;
+    let (w, h) = r.export.render_size;
+    let child = Command::new(POVRAY)
+        .current_dir(dir)
+        .args(["+Irendiff.pov", "+Orendiff.png"])
         .arg(format!("+W{w}"))
         .arg(format!("+H{h}"))
         .args([
@@ -237,9 +264,15 @@ pub fn render(scene: &Scene, r: &Reference, work: &Path) -> Result<LinearImage, 
             "-V",
             "+WT1",
         ])
-        .arg(format!("+L{}", work.display()))
-        .output()
+        .arg(format!("+L{SCENE_LINK}"))
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
         .map_err(|_| GoldenError::NoPovray)?;
+    let child_guard = crate::cleanup::ChildGuard::new(child.id());
+    let out = child.wait_with_output().map_err(|e| io(&pov, e))?;
+    drop(child_guard);
     if !out.status.success() || !png.exists() {
         let err = String::from_utf8_lossy(&out.stderr);
         let tail: Vec<&str> = err
@@ -253,7 +286,8 @@ pub fn render(scene: &Scene, r: &Reference, work: &Path) -> Result<LinearImage, 
             message: tail.into_iter().rev().collect::<Vec<_>>().join(" / "),
         });
     }
-    let img = image_io::read_png_linear(&png)?;
+    let img =
+        image_io::read_png_linear_within(&png, Some((w, h)), &crate::budget::Budget::default())?;
     Ok(average_blocks(&img, r.export.samples))
 }
 
@@ -298,51 +332,68 @@ pub fn metadata_path(golden_dir: &Path, scene: &Scene) -> PathBuf {
     golden_dir.join(format!("{}.toml", scene.name()))
 }
 
-/// The metadata text of a scene's references.
+/// The metadata text of a scene's references, written by the `toml`
+/// serializer (which escapes every string; the scene's name reaches the
+/// comment line only through [`crate::escape::sdl_comment`]'s printable
+/// ASCII).
 #[must_use]
 pub fn metadata(scene: &Scene, version: &str, refs: &[Reference]) -> String {
-    use std::fmt::Write as _;
+    use toml::{Table, Value};
     let name = scene.name();
-    let mut o = String::new();
-    let _ = writeln!(
-        o,
-        "# POV-Ray references of {name}.toml, written by `rendiff golden --update`."
-    );
-    let _ = writeln!(
-        o,
-        "# A reference whose hashes no longer match its scene's export is stale."
-    );
-    let _ = writeln!(o, "povray = \"{version}\"");
-    let _ = writeln!(o, "scene = \"{name}.toml\"");
-    for r in refs {
-        let _ = writeln!(o, "\n[[reference]]");
-        let _ = writeln!(o, "file = \"{name}{}.png\"", r.variant.suffix());
-        let _ = writeln!(o, "variant = \"{}\"", r.variant.name());
-        let _ = writeln!(o, "max_depth = {}", r.max_depth);
-        let _ = writeln!(o, "samples = {}", r.export.samples);
-        let _ = writeln!(
-            o,
-            "render_size = [{}, {}]",
-            r.export.render_size.0, r.export.render_size.1
-        );
-        let _ = writeln!(
-            o,
-            "command = \"{}\"",
-            command_line(
-                &format!("{name}{}.pov", r.variant.suffix()),
-                "out.png",
-                r.export.render_size
-            )
-        );
-        let _ = writeln!(o, "pov_fnv1a = \"{:016x}\"", r.pov_hash);
-        let imgs: Vec<String> = r
-            .image_hashes
-            .iter()
-            .map(|(n, h)| format!("{{ file = \"{n}\", fnv1a = \"{h:016x}\" }}"))
-            .collect();
-        let _ = writeln!(o, "images = [{}]", imgs.join(", "));
-    }
-    o
+    let mut root = Table::new();
+    root.insert("povray".into(), Value::String(version.to_string()));
+    root.insert("scene".into(), Value::String(format!("{name}.toml")));
+    let entries: Vec<Value> = refs
+        .iter()
+        .map(|r| {
+            let mut t = Table::new();
+            let file = format!("{name}{}.png", r.variant.suffix());
+            t.insert("file".into(), Value::String(file));
+            t.insert("variant".into(), Value::String(r.variant.name().into()));
+            t.insert("max_depth".into(), Value::Integer(i64::from(r.max_depth)));
+            t.insert(
+                "samples".into(),
+                Value::Integer(i64::from(r.export.samples)),
+            );
+            t.insert(
+                "render_size".into(),
+                Value::Array(vec![
+                    Value::Integer(i64::from(r.export.render_size.0)),
+                    Value::Integer(i64::from(r.export.render_size.1)),
+                ]),
+            );
+            t.insert(
+                "command".into(),
+                Value::String(command_line(
+                    &format!("{name}{}.pov", r.variant.suffix()),
+                    "out.png",
+                    r.export.render_size,
+                )),
+            );
+            t.insert(
+                "pov_fnv1a".into(),
+                Value::String(format!("{:016x}", r.pov_hash)),
+            );
+            let images = r
+                .image_hashes
+                .iter()
+                .map(|(n, h)| {
+                    let mut i = Table::new();
+                    i.insert("file".into(), Value::String(n.clone()));
+                    i.insert("fnv1a".into(), Value::String(format!("{h:016x}")));
+                    Value::Table(i)
+                })
+                .collect();
+            t.insert("images".into(), Value::Array(images));
+            Value::Table(t)
+        })
+        .collect();
+    root.insert("reference".into(), Value::Array(entries));
+    format!(
+        "# POV-Ray references of {}.toml, written by `rendiff golden --update`.\n# A reference whose hashes no longer match its scene's export is stale.\n{}",
+        crate::escape::sdl_comment(&name),
+        toml::to_string(&root).unwrap_or_default()
+    )
 }
 
 /// Problems of a scene's stored references that need no POV-Ray to see:
@@ -428,8 +479,8 @@ pub fn stale(scene: &Scene, tri: &TriScene, golden_dir: &Path) -> Result<Vec<Str
     Ok(problems)
 }
 
-/// Renders every reference of a scene into `work` and returns them with
-/// their final paths (nothing in the golden folder is touched).
+/// Renders every reference of a scene and returns them with their final
+/// paths (nothing in the golden folder is touched).
 ///
 /// # Errors
 ///
@@ -438,22 +489,240 @@ pub fn render_all(
     scene: &Scene,
     tri: &TriScene,
     golden_dir: &Path,
-    work: &Path,
 ) -> Result<Vec<(Reference, LinearImage, PathBuf)>, GoldenError> {
     references(scene, tri)?
         .into_iter()
         .map(|r| {
-            let img = render(scene, &r, work)?;
+            let img = render(scene, &r)?;
             let path = reference_path(golden_dir, scene, r.variant);
             Ok((r, img, path))
         })
         .collect()
 }
 
-/// Writes rendered references and their metadata: every file is first
-/// written in full to a temporary name in the golden folder, then the set
-/// is swapped in by renames that are undone if one fails, so a failure at
-/// any point leaves the old set intact.
+/// The lock file of a golden folder: updates hold it exclusively, readers
+/// shared, so a reader never sees a set half swapped in and two updates
+/// never interleave.
+pub const LOCK_FILE: &str = ".rendiff-golden.lock";
+
+/// The journal of a commit in progress: which staged file becomes which
+/// reference, and where each old file is set aside. While it exists the
+/// commit is incomplete; the next run that takes the lock finishes it
+/// (forward) or undoes it (rollback), as the journal says.
+pub const JOURNAL_FILE: &str = ".rendiff-golden.journal";
+
+/// The prefix of staged and set-aside files in a golden folder.
+const STAGED_PREFIX: &str = ".rendiff-staged.";
+
+/// A held lock on a golden folder (released on drop).
+#[derive(Debug)]
+pub struct GoldenLock {
+    _file: Option<std::fs::File>,
+}
+
+impl GoldenLock {
+    /// Takes the folder's lock exclusively (waiting for other holders),
+    /// creating the folder if needed, and completes or undoes a commit an
+    /// earlier run left incomplete (killed part way).
+    ///
+    /// # Errors
+    ///
+    /// [`GoldenError::Image`] when the folder or its lock cannot be
+    /// created, or the recovery fails.
+    pub fn exclusive(golden_dir: &Path) -> Result<GoldenLock, GoldenError> {
+        std::fs::create_dir_all(golden_dir).map_err(|e| io_err(golden_dir, e))?;
+        let file = open_lock(golden_dir).map_err(|e| io_err(&golden_dir.join(LOCK_FILE), e))?;
+        file.lock()
+            .map_err(|e| io_err(&golden_dir.join(LOCK_FILE), e))?;
+        recover(golden_dir)?;
+        Ok(GoldenLock { _file: Some(file) })
+    }
+
+    /// Takes the folder's lock shared, for reading its references. A
+    /// folder that does not exist or cannot be written (a read-only
+    /// checkout) is read without a lock: no update can be under way there.
+    /// An incomplete commit is completed first (under the exclusive lock).
+    ///
+    /// # Errors
+    ///
+    /// [`GoldenError::Image`] when the lock cannot be taken, or an
+    /// incomplete commit is found in a folder rendiff cannot write.
+    pub fn shared(golden_dir: &Path) -> Result<GoldenLock, GoldenError> {
+        if !golden_dir.is_dir() {
+            return Ok(GoldenLock { _file: None });
+        }
+        let Ok(file) = open_lock(golden_dir) else {
+            if golden_dir.join(JOURNAL_FILE).exists() {
+                return Err(GoldenError::Metadata {
+                    path: golden_dir.join(JOURNAL_FILE),
+                    message: "an interrupted `golden --update` left this commit incomplete, and the folder cannot be written to complete it; run `rendiff golden --update` where it can".into(),
+                });
+            }
+            return Ok(GoldenLock { _file: None });
+        };
+        file.lock_shared()
+            .map_err(|e| io_err(&golden_dir.join(LOCK_FILE), e))?;
+        if golden_dir.join(JOURNAL_FILE).exists() {
+            drop(file);
+            drop(GoldenLock::exclusive(golden_dir)?);
+            return GoldenLock::shared(golden_dir);
+        }
+        Ok(GoldenLock { _file: Some(file) })
+    }
+}
+
+fn open_lock(golden_dir: &Path) -> std::io::Result<std::fs::File> {
+    std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .create(true)
+        .truncate(false)
+        .open(golden_dir.join(LOCK_FILE))
+}
+
+fn io_err(path: &Path, source: std::io::Error) -> GoldenError {
+    image_io::ImageIoError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
+    .into()
+}
+
+/// One file of a commit (names relative to the golden folder).
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+struct Entry {
+    /// The complete new file.
+    staged: String,
+    /// The reference it becomes.
+    target: String,
+    /// Where the old reference is set aside (`None`: there was none).
+    aside: Option<String>,
+}
+
+/// What the journal says to do with an incomplete commit.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+enum Direction {
+    /// Every staged file was complete: finish the commit.
+    Forward,
+    /// The commit failed: put the old files back.
+    Rollback,
+}
+
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+struct Journal {
+    direction: Direction,
+    entries: Vec<Entry>,
+}
+
+fn write_journal(golden_dir: &Path, j: &Journal) -> Result<(), GoldenError> {
+    let text = serde_json::to_string_pretty(j).map_err(|e| GoldenError::Metadata {
+        path: golden_dir.join(JOURNAL_FILE),
+        message: e.to_string(),
+    })?;
+    image_io::write_atomic(&golden_dir.join(JOURNAL_FILE), |f| {
+        std::io::Write::write_all(f, text.as_bytes())
+    })?;
+    Ok(())
+}
+
+/// A name the journal gives must be a plain file name in the folder (the
+/// journal is read back from disk: it may not point elsewhere).
+fn plain(golden_dir: &Path, name: &str) -> Result<PathBuf, GoldenError> {
+    let p = Path::new(name);
+    let ok = p.components().count() == 1
+        && matches!(p.components().next(), Some(std::path::Component::Normal(_)));
+    if ok {
+        Ok(golden_dir.join(p))
+    } else {
+        Err(GoldenError::Metadata {
+            path: golden_dir.join(JOURNAL_FILE),
+            message: format!(
+                "names {}, which is not a file of this folder",
+                crate::escape::message(name)
+            ),
+        })
+    }
+}
+
+/// Completes or undoes an incomplete commit (the caller holds the
+/// exclusive lock), then removes staged files no journal names (a run
+/// killed while staging). Every step is idempotent, so a recovery killed
+/// part way is finished by the next one.
+fn recover(golden_dir: &Path) -> Result<(), GoldenError> {
+    let journal = golden_dir.join(JOURNAL_FILE);
+    if journal.exists() {
+        let text = crate::input::read_file(&journal).map_err(|e| io_err(&journal, e))?;
+        let j: Journal = serde_json::from_slice(&text).map_err(|e| GoldenError::Metadata {
+            path: journal.clone(),
+            message: format!(
+                "unreadable commit journal ({e}); remove it and run `rendiff golden --update`"
+            ),
+        })?;
+        apply(golden_dir, &j)?;
+        std::fs::remove_file(&journal).map_err(|e| io_err(&journal, e))?;
+    }
+    let entries = std::fs::read_dir(golden_dir).map_err(|e| io_err(golden_dir, e))?;
+    for e in entries.filter_map(Result::ok) {
+        let name = e.file_name().to_string_lossy().into_owned();
+        // Staged files, and the atomic writer's temporary of the journal.
+        if name.starts_with(STAGED_PREFIX)
+            || (name.starts_with(&format!(".{JOURNAL_FILE}.")) && name.ends_with(".tmp"))
+        {
+            let _ = std::fs::remove_file(e.path());
+        }
+    }
+    Ok(())
+}
+
+/// Carries a journal out (see [`recover`]).
+fn apply(golden_dir: &Path, j: &Journal) -> Result<(), GoldenError> {
+    let exists = |p: &Path| std::fs::symlink_metadata(p).is_ok();
+    let rename = |a: &Path, b: &Path| std::fs::rename(a, b).map_err(|e| io_err(b, e));
+    for e in &j.entries {
+        let staged = plain(golden_dir, &e.staged)?;
+        let target = plain(golden_dir, &e.target)?;
+        let aside = e
+            .aside
+            .as_deref()
+            .map(|a| plain(golden_dir, a))
+            .transpose()?;
+        match j.direction {
+            Direction::Forward => {
+                if exists(&staged) {
+                    rename(&staged, &target)?;
+                }
+                if let Some(a) = &aside {
+                    let _ = std::fs::remove_file(a);
+                }
+            }
+            Direction::Rollback => {
+                let placed = !exists(&staged);
+                let old_aside = !exists(&target) || placed;
+                match &aside {
+                    Some(a) if old_aside && exists(a) => rename(a, &target)?,
+                    Some(a) => {
+                        let _ = std::fs::remove_file(a);
+                    }
+                    None if placed => {
+                        let _ = std::fs::remove_file(&target);
+                    }
+                    None => {}
+                }
+                let _ = std::fs::remove_file(&staged);
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Writes rendered references and their metadata as one set, under the
+/// folder's exclusive lock: every file is first written in full under a
+/// fresh staged name, then a journal names what becomes what, then each
+/// old file is set aside and its new one renamed in. A failure undoes the
+/// commit; a kill at any point is completed by the next run that takes the
+/// lock (see [`GoldenLock::exclusive`]), so the folder always ends with
+/// the whole old set or the whole new one.
 ///
 /// # Errors
 ///
@@ -464,86 +733,110 @@ pub fn store(
     rendered: &[(Reference, LinearImage, PathBuf)],
     golden_dir: &Path,
 ) -> Result<(), GoldenError> {
-    std::fs::create_dir_all(golden_dir).map_err(|source| image_io::ImageIoError::Io {
-        path: golden_dir.to_path_buf(),
-        source,
-    })?;
-    let mut staged = Vec::new();
-    let result = (|| -> Result<(), GoldenError> {
-        for (_, img, path) in rendered {
-            let tmp = path.with_extension("png.staged");
-            image_io::write_png(
-                &tmp,
-                img.width,
-                img.height,
-                &img.pixels,
-                PngEncoding::Linear16,
-            )?;
-            staged.push((tmp, path.clone()));
+    let _lock = GoldenLock::exclusive(golden_dir)?;
+    let mut files: Vec<(Vec<u8>, PathBuf)> = Vec::new();
+    for (_, img, path) in rendered {
+        let bytes =
+            image_io::encode_png(img.width, img.height, &img.pixels, PngEncoding::Linear16)?;
+        files.push((bytes, path.clone()));
+    }
+    let refs: Vec<Reference> = rendered.iter().map(|(r, _, _)| r.clone()).collect();
+    files.push((
+        metadata(scene, version, &refs).into_bytes(),
+        metadata_path(golden_dir, scene),
+    ));
+    let mut entries = Vec::new();
+    let staged = (|| -> Result<(), GoldenError> {
+        for (bytes, target) in &files {
+            let name = |p: &Path| p.file_name().map(|n| n.to_string_lossy().into_owned());
+            let target_name = name(target).ok_or_else(|| GoldenError::Metadata {
+                path: target.clone(),
+                message: "not a file name".into(),
+            })?;
+            let staged = new_staged(golden_dir)?;
+            {
+                use std::io::Write as _;
+                let mut f = staged.as_file();
+                f.write_all(bytes)
+                    .and_then(|()| f.sync_all())
+                    .map_err(|e| io_err(staged.path(), e))?;
+            }
+            let aside = if std::fs::symlink_metadata(target).is_ok() {
+                let a = new_staged(golden_dir)?;
+                let (_, p) = a.keep().map_err(|e| io_err(golden_dir, e.error))?;
+                name(&p)
+            } else {
+                None
+            };
+            let (_, p) = staged.keep().map_err(|e| io_err(golden_dir, e.error))?;
+            entries.push(Entry {
+                staged: name(&p).unwrap_or_default(),
+                target: target_name,
+                aside,
+            });
         }
-        let refs: Vec<Reference> = rendered.iter().map(|(r, _, _)| r.clone()).collect();
-        let meta = metadata_path(golden_dir, scene);
-        let tmp = meta.with_extension("toml.staged");
-        let text = metadata(scene, version, &refs);
-        image_io::write_atomic(&tmp, |f| std::io::Write::write_all(f, text.as_bytes()))?;
-        staged.push((tmp, meta));
         Ok(())
     })();
-    if let Err(e) = result {
-        for (tmp, _) in &staged {
-            let _ = std::fs::remove_file(tmp);
-        }
+    if let Err(e) = staged {
+        let _ = recover(golden_dir);
         return Err(e);
     }
-    commit(&staged)
-}
-
-/// Moves staged files into place as one set: every old file is first set
-/// aside (renamed to `*.previous`), then the new ones are renamed in; if
-/// any rename fails, what was moved is moved back, so the folder holds
-/// either the whole old set or the whole new one.
-fn commit(staged: &[(PathBuf, PathBuf)]) -> Result<(), GoldenError> {
-    let aside = |p: &Path| {
-        p.with_extension(format!(
-            "{}.previous",
-            p.extension().and_then(|e| e.to_str()).unwrap_or("")
-        ))
+    let mut journal = Journal {
+        direction: Direction::Forward,
+        entries,
     };
-    let mut moved_aside: Vec<(PathBuf, PathBuf)> = Vec::new();
-    let mut placed: Vec<PathBuf> = Vec::new();
-    let mut step = || -> Result<(), (PathBuf, std::io::Error)> {
-        for (_, path) in staged {
-            if path.exists() {
-                let a = aside(path);
-                std::fs::rename(path, &a).map_err(|e| (path.clone(), e))?;
-                moved_aside.push((a, path.clone()));
+    if let Err(e) = write_journal(golden_dir, &journal) {
+        let _ = recover(golden_dir);
+        return Err(e);
+    }
+    let swapped = (|| -> Result<(), GoldenError> {
+        for (k, e) in journal.entries.iter().enumerate() {
+            let target = golden_dir.join(&e.target);
+            if let Some(a) = &e.aside {
+                std::fs::rename(&target, golden_dir.join(a)).map_err(|err| io_err(&target, err))?;
             }
-        }
-        for (tmp, path) in staged {
-            std::fs::rename(tmp, path).map_err(|e| (path.clone(), e))?;
-            placed.push(path.clone());
+            std::fs::rename(golden_dir.join(&e.staged), &target)
+                .map_err(|err| io_err(&target, err))?;
+            if k == 0 {
+                pause_in_commit();
+            }
         }
         Ok(())
-    };
-    match step() {
+    })();
+    match swapped {
         Ok(()) => {
-            for (a, _) in &moved_aside {
-                let _ = std::fs::remove_file(a);
-            }
-            Ok(())
+            apply(golden_dir, &journal)?;
         }
-        Err((path, source)) => {
-            for p in &placed {
-                let _ = std::fs::remove_file(p);
-            }
-            for (a, p) in &moved_aside {
-                let _ = std::fs::rename(a, p);
-            }
-            for (tmp, _) in staged {
-                let _ = std::fs::remove_file(tmp);
-            }
-            Err(image_io::ImageIoError::Io { path, source }.into())
+        Err(e) => {
+            journal.direction = Direction::Rollback;
+            write_journal(golden_dir, &journal)?;
+            apply(golden_dir, &journal)?;
+            let _ = std::fs::remove_file(golden_dir.join(JOURNAL_FILE));
+            return Err(e);
         }
+    }
+    std::fs::remove_file(golden_dir.join(JOURNAL_FILE))
+        .map_err(|e| io_err(&golden_dir.join(JOURNAL_FILE), e))?;
+    Ok(())
+}
+
+fn new_staged(golden_dir: &Path) -> Result<tempfile::NamedTempFile, GoldenError> {
+    tempfile::Builder::new()
+        .prefix(STAGED_PREFIX)
+        .permissions(std::os::unix::fs::PermissionsExt::from_mode(0o644))
+        .tempfile_in(golden_dir)
+        .map_err(|e| io_err(golden_dir, e))
+}
+
+/// The test hook of the killed-update test (`tests/it/atomic.rs`): with
+/// `RENDIFF_TEST_PAUSE_IN_COMMIT_MS` set, a commit waits that long after
+/// its first file is swapped in, so a SIGKILL lands in the middle.
+fn pause_in_commit() {
+    if let Some(ms) = std::env::var("RENDIFF_TEST_PAUSE_IN_COMMIT_MS")
+        .ok()
+        .and_then(|v| v.parse::<u64>().ok())
+    {
+        std::thread::sleep(std::time::Duration::from_millis(ms));
     }
 }
 

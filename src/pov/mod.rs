@@ -166,9 +166,31 @@ fn is_primitive(o: &Object, geometry: Geometry) -> bool {
         )
 }
 
+/// Why a scene cannot be written as SDL: a file it reads has a name
+/// POV-Ray cannot open (see [`crate::escape::sdl_file_name`]).
+#[derive(Debug, thiserror::Error)]
+#[error("{}: `materials.{material}.{key}`: {message}", crate::escape::message(&.path.display().to_string()))]
+pub struct ExportError {
+    /// The scene file.
+    pub path: PathBuf,
+    /// The material.
+    pub material: String,
+    /// The key naming the file (`pigment.image`, `bump.image`).
+    pub key: &'static str,
+    /// What is wrong.
+    pub message: String,
+}
+
 /// Exports a scene (its `TriScene` must come from the same scene).
-#[must_use]
-pub fn export(scene: &Scene, tri: &TriScene, opts: &ExportOptions) -> Export {
+///
+/// Every string from the scene reaches the SDL through
+/// [`crate::escape`]: file names as escaped literals, names and labels in
+/// comments with everything but printable ASCII replaced.
+///
+/// # Errors
+///
+/// [`ExportError`] for an image whose name POV-Ray cannot open.
+pub fn export(scene: &Scene, tri: &TriScene, opts: &ExportOptions) -> Result<Export, ExportError> {
     let mut o = String::new();
     let cam = &tri.camera;
     let n = cam.samples();
@@ -177,10 +199,12 @@ pub fn export(scene: &Scene, tri: &TriScene, opts: &ExportOptions) -> Export {
     let _ = writeln!(
         o,
         "// Exported by rendiff from {}: render {}x{} from the scene's folder with",
-        scene
-            .path
-            .file_name()
-            .map_or_else(String::new, |s| s.to_string_lossy().into_owned()),
+        crate::escape::sdl_comment(
+            &scene
+                .path
+                .file_name()
+                .map_or_else(String::new, |s| s.to_string_lossy().into_owned())
+        ),
         render_size.0,
         render_size.1
     );
@@ -283,7 +307,7 @@ pub fn export(scene: &Scene, tri: &TriScene, opts: &ExportOptions) -> Export {
         } else {
             write_mesh2(&mut body, tri, k, opts.abridged)
         };
-        write_texture(&mut body, scene, m, uv, &mut images);
+        write_texture(&mut body, scene, m, uv, &mut images)?;
         if m.is_transparent() && m.ior != 1.0 {
             let _ = writeln!(body, "  interior {{ ior {} }}", f(m.ior));
         }
@@ -298,7 +322,8 @@ pub fn export(scene: &Scene, tri: &TriScene, opts: &ExportOptions) -> Export {
             .collect();
         let deepest = depths.iter().copied().fold(f64::NEG_INFINITY, f64::max);
         let nearest = depths.iter().copied().fold(f64::INFINITY, f64::min);
-        let _ = writeln!(o, "// {}", info.label);
+        let label = crate::escape::sdl_comment(&info.label);
+        let _ = writeln!(o, "// {label}");
         if deepest <= cam.far() {
             let _ = writeln!(o, "{body}}}");
             continue;
@@ -306,8 +331,7 @@ pub fn export(scene: &Scene, tri: &TriScene, opts: &ExportOptions) -> Export {
         if nearest <= cam.far() {
             let _ = writeln!(
                 o,
-                "{body}  {far_plane}\n  no_shadow no_reflection\n}}\n// {} beyond the far plane: shadows and reflections only",
-                info.label
+                "{body}  {far_plane}\n  no_shadow no_reflection\n}}\n// {label} beyond the far plane: shadows and reflections only"
             );
         } else {
             let _ = writeln!(
@@ -317,12 +341,12 @@ pub fn export(scene: &Scene, tri: &TriScene, opts: &ExportOptions) -> Export {
         }
         let _ = writeln!(o, "{body}  no_image\n}}");
     }
-    Export {
+    Ok(Export {
         text: o,
         images,
         render_size,
         samples: n,
-    }
+    })
 }
 
 fn write_primitive(o: &mut String, obj: &Object) {
@@ -496,8 +520,8 @@ fn write_texture(
     m: &Material,
     uv: bool,
     images: &mut Vec<ImageRef>,
-) {
-    let mut note = |tex: &crate::texture::Texture| {
+) -> Result<(), ExportError> {
+    let mut note = |tex: &crate::texture::Texture, key: &'static str| {
         let rgb_copy = tex.is_grey() && tex.bit_depth() == 8;
         let name = if rgb_copy {
             // Written by the renderer into its folder, found by +L.
@@ -509,14 +533,20 @@ fn write_texture(
         } else {
             image_name(scene, tex.path())
         };
+        let literal = crate::escape::sdl_file_name(&name).map_err(|message| ExportError {
+            path: scene.path.clone(),
+            material: m.name.clone(),
+            key,
+            message,
+        })?;
         if !images.iter().any(|i| i.name == name) {
             images.push(ImageRef {
-                name: name.clone(),
+                name,
                 source: tex.path().to_path_buf(),
                 rgb_copy,
             });
         }
-        name
+        Ok(literal)
     };
     if uv && (m.needs_uv()) {
         let _ = writeln!(o, "  uv_mapping");
@@ -534,7 +564,7 @@ fn write_texture(
             );
         }
         Pigment::Image(tex) => {
-            let name = note(tex);
+            let name = note(tex, "pigment.image")?;
             let mut ft = String::new();
             if !tex.has_alpha() && m.filter + m.transmit > 0.0 {
                 let _ = write!(
@@ -546,15 +576,15 @@ fn write_texture(
             }
             let _ = writeln!(
                 o,
-                "  pigment {{ image_map {{ png \"{name}\" gamma 1.0 interpolate 2{ft} }} }}"
+                "  pigment {{ image_map {{ png {name} gamma 1.0 interpolate 2{ft} }} }}"
             );
         }
     }
     if let Some(b) = &m.bump {
-        let name = note(&b.texture);
+        let name = note(&b.texture, "bump.image")?;
         let _ = writeln!(
             o,
-            "  normal {{ bump_map {{ png \"{name}\" gamma 1.0 bump_size {} interpolate 2 }} }}",
+            "  normal {{ bump_map {{ png {name} gamma 1.0 bump_size {} interpolate 2 }} }}",
             f(b.size)
         );
     }
@@ -572,4 +602,5 @@ fn write_texture(
         f(m.metallic),
         f(m.reflection)
     );
+    Ok(())
 }

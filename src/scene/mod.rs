@@ -299,6 +299,32 @@ impl Scene {
         s
     }
 
+    /// Every file the scene reads: the scene file, its meshes and its
+    /// images (each once). A command refuses to write over any of them.
+    #[must_use]
+    pub fn input_files(&self) -> Vec<PathBuf> {
+        let mut files = vec![self.path.clone()];
+        let mut add = |p: &Path| {
+            if !files.iter().any(|f| f == p) {
+                files.push(p.to_path_buf());
+            }
+        };
+        for o in &self.objects {
+            if let Shape::Mesh { data, .. } = &o.shape {
+                add(&data.path);
+            }
+        }
+        for m in &self.materials {
+            if let crate::shade::Pigment::Image(t) = &m.pigment {
+                add(t.path());
+            }
+            if let Some(b) = &m.bump {
+                add(b.texture.path());
+            }
+        }
+        files
+    }
+
     /// Bytes its loaded data holds: every distinct mesh and texture.
     #[must_use]
     pub fn data_bytes(&self) -> u64 {

@@ -86,8 +86,8 @@ fn a_killed_render_leaves_the_old_file() {
 }
 
 /// A golden update that fails while it swaps the files in (a folder is in
-/// the way of one old file being set aside, after others were) puts every
-/// old file back.
+/// the way of the last reference, after the others were swapped in) puts
+/// every old file back and leaves nothing of its own behind.
 #[test]
 fn a_failed_golden_update_keeps_the_old_set() {
     let dir = temp("golden");
@@ -111,21 +111,19 @@ fn a_failed_golden_update_keeps_the_old_set() {
             (r, fake.clone(), path)
         })
         .collect();
-    // The old set: one file per reference and the metadata.
+    // The old set: the metadata and every reference but the last, which is
+    // a folder that cannot be replaced by a file (swapped after the rest).
     let meta = golden::metadata_path(&dir, &job.scene);
     std::fs::write(&meta, "old metadata").unwrap();
-    for (_, _, p) in &rendered {
+    let (last, rest) = rendered.split_last().unwrap();
+    for (_, _, p) in rest {
         std::fs::write(p, "old image").unwrap();
     }
-    // Where the last image would be set aside lies a non-empty folder: the
-    // first image is already set aside when that rename fails.
-    let last = rendered[rendered.len() - 1].2.clone();
-    let blocked = last.with_extension("png.previous");
-    std::fs::create_dir_all(blocked.join("in the way")).unwrap();
+    std::fs::create_dir_all(last.2.join("in the way")).unwrap();
     let err = golden::store(&job.scene, "test", &rendered, &dir);
     assert!(err.is_err(), "the update should fail");
     assert_eq!(std::fs::read_to_string(&meta).unwrap(), "old metadata");
-    for (_, _, p) in &rendered {
+    for (_, _, p) in rest {
         assert_eq!(
             std::fs::read_to_string(p).unwrap(),
             "old image",
@@ -133,18 +131,16 @@ fn a_failed_golden_update_keeps_the_old_set() {
             p.display()
         );
     }
-    assert!(blocked.join("in the way").is_dir());
+    assert!(last.2.join("in the way").is_dir());
     let left: Vec<String> = std::fs::read_dir(&dir)
         .unwrap()
         .filter_map(Result::ok)
         .map(|e| e.file_name().to_string_lossy().into_owned())
-        .filter(|n| {
-            n.contains(".staged") || (n.contains(".previous") && !n.ends_with("png.previous"))
-        })
+        .filter(|n| n.starts_with(".rendiff-staged") || n.contains("journal"))
         .collect();
     assert!(left.is_empty(), "left behind: {left:?}");
     // Without the obstacle the same update goes through whole.
-    std::fs::remove_dir_all(&blocked).unwrap();
+    std::fs::remove_dir_all(&last.2).unwrap();
     golden::store(&job.scene, "test", &rendered, &dir).unwrap();
     assert_ne!(std::fs::read_to_string(&meta).unwrap(), "old metadata");
     for (_, _, p) in &rendered {

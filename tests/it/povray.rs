@@ -336,7 +336,8 @@ fn export_text_snapshots() {
                     max_depth: job.settings.max_depth,
                     abridged: true,
                 },
-            );
+            )
+            .unwrap();
             insta::assert_snapshot!(format!("export_{name}_{geometry}"), e.text);
         }
     }

@@ -15,16 +15,51 @@ use crate::args::{
     RenderFlags,
 };
 
-/// Writes to standard output; a closed pipe (`rendiff pov x | head`) ends
-/// the program quietly with success, as grep and ripgrep do.
-pub fn say(text: &str) {
+/// Set once standard output is a closed pipe: later output is dropped.
+static STDOUT_CLOSED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Writes text for a person to standard output, control characters
+/// escaped (a scene or file name cannot reach the terminal raw).
+pub fn say(text: &str) -> Result<()> {
+    emit(rendiff::escape::lines(text).as_bytes())
+}
+
+/// Writes data (SDL, JSON) to standard output as it is. A closed pipe
+/// (`rendiff diff s.toml | head -c 10`) drops the rest of the output and
+/// leaves the exit status to the verdict, so `pipefail` still sees a
+/// failure; any other error (a full disk, `/dev/full`) is an error.
+pub fn emit(bytes: &[u8]) -> Result<()> {
     use std::io::Write;
-    let mut out = std::io::stdout().lock();
-    if let Err(e) = out.write_all(text.as_bytes()).and_then(|()| out.flush())
-        && e.kind() == std::io::ErrorKind::BrokenPipe
-    {
-        std::process::exit(0);
+    use std::sync::atomic::Ordering;
+    if STDOUT_CLOSED.load(Ordering::Relaxed) {
+        return Ok(());
     }
+    let mut out = std::io::stdout().lock();
+    match out.write_all(bytes).and_then(|()| out.flush()) {
+        Ok(()) => Ok(()),
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => {
+            STDOUT_CLOSED.store(true, Ordering::Relaxed);
+            Ok(())
+        }
+        Err(e) => Err(anyhow::anyhow!("could not write to standard output: {e}")),
+    }
+}
+
+/// A warning on standard error, control characters escaped (a warning
+/// that cannot be written is dropped: there is nowhere else to say it).
+pub fn warn(text: &str) {
+    use std::io::Write;
+    let _ = writeln!(
+        std::io::stderr(),
+        "warning: {}",
+        rendiff::escape::message(text)
+    );
+}
+
+/// Refuses an output that is one of the request's inputs.
+fn refuse_inputs(out: &Path, inputs: &[PathBuf]) -> Result<()> {
+    rendiff::output::refuse_inputs(out, inputs)?;
+    Ok(())
 }
 
 /// Runs a parsed command line.
@@ -67,6 +102,7 @@ fn lines(a: &LinesArgs) -> Result<Outcome> {
         },
     )?;
     check_output_dir(&a.output)?;
+    refuse_inputs(&a.output, &job.scene.input_files())?;
     let start = std::time::Instant::now();
     let accel = rendiff::accel::Accel::new(&job.tri, rendiff::accel::AccelOptions::default());
     let d = hidden_lines(
@@ -98,7 +134,7 @@ fn lines(a: &LinesArgs) -> Result<Outcome> {
         s.visible,
         s.hidden,
         a.output.display()
-    ));
+    ))?;
     Ok(Outcome::Ok)
 }
 
@@ -141,7 +177,7 @@ fn bench_scaling(a: &BenchArgs) -> Result<Outcome> {
         let _ = writeln!(text, "{line}");
     }
     let _ = writeln!(text, "results in {}", a.out.display());
-    say(&text);
+    say(&text)?;
     Ok(Outcome::Ok)
 }
 
@@ -195,7 +231,13 @@ fn bench(a: &BenchArgs) -> Result<Outcome> {
         rendiff::image_io::write_atomic(&a.out.join(&file), |f| {
             std::io::Write::write_all(f, svg.as_bytes())
         })?;
-        let _ = writeln!(html, "<h2>{name}</h2>\n<img src=\"{file}\" alt=\"{name}\">");
+        let _ = writeln!(
+            html,
+            "<h2>{}</h2>\n<img src=\"{}\" alt=\"{}\">",
+            rendiff::escape::html(name),
+            rendiff::escape::href(&file),
+            rendiff::escape::html(name)
+        );
     }
     let savings = bench::plan_savings(&rows);
     let svg = plot::plan_savings(&savings)?;
@@ -242,7 +284,7 @@ fn bench(a: &BenchArgs) -> Result<Outcome> {
         rows.len(),
         a.out.display()
     );
-    say(&text);
+    say(&text)?;
     Ok(Outcome::Ok)
 }
 
@@ -266,14 +308,19 @@ fn pov(a: &PovArgs) -> Result<Outcome> {
             max_depth: job.settings.max_depth,
             abridged: false,
         },
-    );
+    )?;
     match &a.output {
         Some(out) => {
             check_output_dir(out)?;
+            let inputs = job.scene.input_files();
+            refuse_inputs(out, &inputs)?;
             let dir = out
                 .parent()
                 .filter(|p| !p.as_os_str().is_empty())
                 .unwrap_or(Path::new("."));
+            for img in e.images.iter().filter(|i| i.rgb_copy) {
+                refuse_inputs(&dir.join(&img.name), &inputs)?;
+            }
             for img in &e.images {
                 img.materialise(dir)?;
             }
@@ -281,7 +328,7 @@ fn pov(a: &PovArgs) -> Result<Outcome> {
                 std::io::Write::write_all(f, e.text.as_bytes())
             })?;
         }
-        None => say(&e.text),
+        None => emit(e.text.as_bytes())?,
     }
     Ok(Outcome::Ok)
 }
@@ -311,24 +358,17 @@ fn golden(a: &GoldenArgs) -> Result<Outcome> {
         .map(|p| Prepared::load(p, &Overrides::default()))
         .collect::<Result<_, _>>()?;
     let version = golden::povray_version()?;
-    let work = std::env::temp_dir().join(format!("rendiff-golden-{}", std::process::id()));
-    std::fs::create_dir_all(&work)
-        .with_context(|| format!("could not create {}", work.display()))?;
     let progress = progress_bar(jobs.len());
     let mut outcome = Outcome::Ok;
     // POV-Ray runs single-threaded (+WT1, for reproducibility), so the
-    // scenes render side by side, each in its own folder.
+    // scenes render side by side, each in its own scratch folder.
     let renders: Vec<_> = {
         use rayon::prelude::*;
         jobs.par_iter()
-            .enumerate()
-            .map(|(i, job)| {
-                let dir = work.join(i.to_string());
-                std::fs::create_dir_all(&dir)
-                    .with_context(|| format!("could not create {}", dir.display()))?;
-                let r = golden::render_all(&job.scene, &job.tri, &a.golden_dir, &dir);
+            .map(|job| {
+                let r = golden::render_all(&job.scene, &job.tri, &a.golden_dir);
                 progress.inc(1);
-                Ok::<_, anyhow::Error>(r?)
+                r
             })
             .collect()
     };
@@ -344,11 +384,13 @@ fn golden(a: &GoldenArgs) -> Result<Outcome> {
                         job.scene.path.display(),
                         rendered.len()
                     ),
-                );
+                )?;
             } else {
+                let _lock = golden::GoldenLock::shared(&a.golden_dir)?;
                 let mut problems = golden::stale(&job.scene, &job.tri, &a.golden_dir)?;
                 for (_, img, path) in &rendered {
-                    match rendiff::image_io::read_png_linear(path) {
+                    let size = Some((img.width, img.height));
+                    match rendiff::image_io::read_png_linear_within(path, size, &job.budget) {
                         Ok(stored) => match golden::max_code_difference(&stored, img) {
                             Some(0) => {}
                             Some(d) => problems.push(format!(
@@ -358,9 +400,7 @@ fn golden(a: &GoldenArgs) -> Result<Outcome> {
                             None => problems
                                 .push(format!("{}: POV-Ray renders another size", path.display())),
                         },
-                        Err(_) => {
-                            problems.push(format!("{}: missing or unreadable", path.display()))
-                        }
+                        Err(e) => problems.push(format!("{}: unreadable ({e})", path.display())),
                     }
                 }
                 if problems.is_empty() {
@@ -371,11 +411,11 @@ fn golden(a: &GoldenArgs) -> Result<Outcome> {
                             job.scene.path.display(),
                             rendered.len()
                         ),
-                    );
+                    )?;
                 } else {
                     outcome = Outcome::Differs;
                     for p in problems {
-                        note(&progress, format!("{}: {p}", job.scene.path.display()));
+                        note(&progress, format!("{}: {p}", job.scene.path.display()))?;
                     }
                 }
             }
@@ -383,22 +423,22 @@ fn golden(a: &GoldenArgs) -> Result<Outcome> {
         Ok(())
     })();
     progress.finish_and_clear();
-    let _ = std::fs::remove_dir_all(&work);
     result?;
     if matches!(outcome, Outcome::Differs) {
-        eprintln!(
-            "some references are stale or no longer reproduced; run `make golden` (rendiff golden --update) after checking why"
+        warn(
+            "some references are stale or no longer reproduced; run `make golden` (rendiff golden --update) after checking why",
         );
     }
     Ok(outcome)
 }
 
 /// A line of output above the progress bar (or plain, without one).
-fn note(bar: &indicatif::ProgressBar, line: String) {
+fn note(bar: &indicatif::ProgressBar, line: String) -> Result<()> {
     if bar.is_hidden() {
-        say(&format!("{line}\n"));
+        say(&format!("{line}\n"))
     } else {
-        bar.println(line);
+        bar.println(rendiff::escape::message(&line));
+        Ok(())
     }
 }
 
@@ -438,26 +478,56 @@ fn diff(a: &DiffArgs) -> Result<Outcome> {
             }
         }
     }
-    if let Some(dir) = &a.out
-        && dir.exists()
-        && !dir.is_dir()
-    {
-        bail!("--out {}: exists and is not a folder", dir.display());
-    }
     // Load every scene first: bad input fails before any work or output.
     let jobs: Vec<(String, Prepared)> = a
         .scenes
         .iter()
         .map(|p| Ok((p.display().to_string(), Prepared::load(p, &ov)?)))
         .collect::<Result<_>>()?;
+    // What the request reads, which no output may replace.
+    let mut inputs: Vec<PathBuf> = jobs
+        .iter()
+        .flat_map(|(_, job)| job.scene.input_files())
+        .collect();
+    for side in [&side_a, &side_b] {
+        match side {
+            Side::Image(p) => inputs.push(p.clone()),
+            Side::Pov {
+                golden_dir,
+                render: false,
+            } => inputs.push(golden_dir.clone()),
+            _ => {}
+        }
+    }
     let several = jobs.len() > 1;
+    let folders = rendiff::output::scene_folders(&a.scenes);
+    // The --out set is written into a fresh folder and swapped in whole.
+    let out_dir = a
+        .out
+        .as_ref()
+        .map(|dir| rendiff::output::OutputDir::begin(dir, &inputs))
+        .transpose()?;
+    if let Some(gb) = &a.flags.gbuffer {
+        for (k, _) in jobs.iter().enumerate() {
+            let base = if several {
+                gb.join(&folders[k])
+            } else {
+                gb.clone()
+            };
+            for side in ["a", "b"] {
+                for f in rendiff::frame::GBUFFER_FILES {
+                    refuse_inputs(&base.join(side).join(f), &inputs)?;
+                }
+            }
+        }
+    }
     let mut reports = Vec::new();
     let mut entries = Vec::new();
-    for (label, job) in &jobs {
+    for (k, (label, job)) in jobs.iter().enumerate() {
         let r = diff::diff(job, label, &side_a, &side_b)?;
         if let Some(gb) = &a.flags.gbuffer {
             let base = if several {
-                gb.join(job.scene.name())
+                gb.join(&folders[k])
             } else {
                 gb.clone()
             };
@@ -467,26 +537,31 @@ fn diff(a: &DiffArgs) -> Result<Outcome> {
                 }
             }
         }
-        if let Some(dir) = &a.out {
-            let sub = if several {
-                job.scene.name()
+        if let Some(od) = &out_dir {
+            let target = if several {
+                let sub = od.path().join(&folders[k]);
+                std::fs::create_dir(&sub)
+                    .with_context(|| format!("could not create {}", sub.display()))?;
+                sub
             } else {
-                String::new()
+                od.path().to_path_buf()
             };
-            let target = if several { dir.join(&sub) } else { dir.clone() };
             diff::write_outputs(&r, &target, encoding(&a.flags))?;
-            entries.push((r.report.clone(), sub));
+            entries.push((r.report.clone(), folders[k].clone()));
         }
         if !a.json {
-            say(&r.report.summary());
+            say(&r.report.summary())?;
         }
         reports.push(r.report);
     }
-    if let (Some(dir), true) = (&a.out, several) {
-        let html = index_html(&entries);
-        rendiff::image_io::write_atomic(&dir.join("index.html"), |f| {
-            std::io::Write::write_all(f, html.as_bytes())
-        })?;
+    if let Some(od) = out_dir {
+        if several {
+            let html = index_html(&entries);
+            rendiff::image_io::write_atomic(&od.path().join("index.html"), |f| {
+                std::io::Write::write_all(f, html.as_bytes())
+            })?;
+        }
+        od.commit()?;
     }
     if a.json {
         let text = if several {
@@ -494,7 +569,7 @@ fn diff(a: &DiffArgs) -> Result<Outcome> {
         } else {
             serde_json::to_string_pretty(&reports[0])?
         };
-        say(&format!("{text}\n"));
+        emit(format!("{text}\n").as_bytes())?;
     }
     Ok(
         if reports.iter().all(rendiff::compare::report::Report::passed) {
@@ -505,14 +580,19 @@ fn diff(a: &DiffArgs) -> Result<Outcome> {
     )
 }
 
-/// Runs `f` on a pool of `threads` workers (all cores when `None`).
+/// Runs `f` on a pool of `threads` workers (all cores when `None`); at
+/// most [`rendiff::budget::max_threads`] (8 per core, at least 64).
 fn with_threads<T: Send>(
     threads: Option<usize>,
     f: impl FnOnce() -> Result<T> + Send,
 ) -> Result<T> {
+    let most = rendiff::budget::max_threads();
     match threads {
         None => f(),
         Some(0) => bail!("--threads 0: expected at least 1"),
+        Some(n) if n > most => bail!(
+            "--threads {n}: expected at most {most} (8 per core of this machine, at least 64)"
+        ),
         Some(n) => {
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(n)
@@ -597,13 +677,20 @@ fn render(a: &RenderArgs) -> Result<Outcome> {
     }
     let job = Prepared::load(&a.scene, &ov)?;
     for w in &job.tri.warnings {
-        eprintln!("warning: {w}");
+        warn(w);
     }
     let out = a
         .output
         .clone()
         .unwrap_or_else(|| PathBuf::from(format!("{}-{backend}.png", job.scene.name())));
     check_output_dir(&out)?;
+    let inputs = job.scene.input_files();
+    refuse_inputs(&out, &inputs)?;
+    if let Some(dir) = &a.flags.gbuffer {
+        for f in rendiff::frame::GBUFFER_FILES {
+            refuse_inputs(&dir.join(f), &inputs)?;
+        }
+    }
     if a.smooth {
         if backend != Backend::Painter {
             bail!(
@@ -625,7 +712,7 @@ fn render(a: &RenderArgs) -> Result<Outcome> {
             job.settings.painter_sort,
             start.elapsed().as_secs_f64() * 1e3,
             out.display()
-        ));
+        ))?;
         return Ok(Outcome::Ok);
     }
     let r = job.render(backend)?;
@@ -643,7 +730,7 @@ fn render(a: &RenderArgs) -> Result<Outcome> {
         if r.frame.samples == 1 { "" } else { "s" },
         r.time_ms,
         out.display()
-    ));
+    ))?;
     Ok(Outcome::Ok)
 }
 
@@ -667,7 +754,7 @@ fn plan(a: &PlanArgs) -> Result<Outcome> {
         ..Overrides::default()
     };
     let job = Prepared::load(&a.scene, &ov)?;
-    say(&describe(&job));
+    say(&describe(&job))?;
     Ok(Outcome::Ok)
 }
 

@@ -23,19 +23,55 @@ fn main() -> ExitCode {
     // A panic is a bug, never an answer: report it as one, without a
     // backtrace, and with an exit status no normal outcome uses.
     std::panic::set_hook(Box::new(|info| {
-        eprintln!("rendiff: internal error (this is a bug, please report it): {info}");
+        use std::io::Write;
+        let text = info.to_string();
+        let _ = writeln!(
+            std::io::stderr(),
+            "rendiff: internal error (this is a bug, please report it): {}",
+            rendiff::escape::message(&text)
+        );
     }));
+    on_signals();
     let cli = args::Cli::parse();
     let result = std::panic::catch_unwind(|| cmd::run(cli));
+    if rendiff::cleanup::is_interrupted() {
+        // The signal's thread is exiting with the signal's status; what
+        // the run ended with (a killed child's failure) is not an answer.
+        loop {
+            std::thread::park();
+        }
+    }
     match result {
         Ok(Ok(Outcome::Ok)) => ExitCode::SUCCESS,
         Ok(Ok(Outcome::Differs)) => ExitCode::from(1),
         Ok(Err(err)) => {
-            eprintln!("error: {}", one_paragraph(&err));
+            use std::io::Write;
+            let text = one_paragraph(&err);
+            let _ = writeln!(
+                std::io::stderr(),
+                "error: {}",
+                rendiff::escape::message(&text)
+            );
             ExitCode::from(2)
         }
         Err(_) => ExitCode::from(101),
     }
+}
+
+/// On SIGINT, SIGTERM or SIGHUP: remove the temporaries not yet renamed
+/// into place, stop the POV-Ray children, and exit as the signal would
+/// (128 + its number), leaving only complete files behind.
+fn on_signals() {
+    use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
+    let Ok(mut signals) = signal_hook::iterator::Signals::new([SIGINT, SIGTERM, SIGHUP]) else {
+        return;
+    };
+    std::thread::spawn(move || {
+        if let Some(sig) = signals.forever().next() {
+            rendiff::cleanup::interrupted();
+            std::process::exit(128 + sig);
+        }
+    });
 }
 
 /// The error and its causes, each once, as one paragraph.

@@ -1,0 +1,329 @@
+//! Where outputs may go: never over an input, folders replaced as a whole
+//! set, folder names for several scenes that stay inside `--out`.
+//!
+//! * [`refuse_inputs`]: an output that is one of the request's inputs (the
+//!   same file by device and inode, whatever the spelling or link) is
+//!   refused, as is an output folder that holds one.
+//! * [`OutputDir`]: a set of files (a diff's pictures, report and page) is
+//!   written into a fresh folder beside the target and swapped in at once
+//!   (`renameat2(RENAME_EXCHANGE)` on Linux), so the folder holds either
+//!   the whole old set or the whole new one, never a mix — also when two
+//!   runs write it at the same time, or the disk fills half-way.
+//! * [`scene_folders`]: one folder name per scene, from its path relative
+//!   to the scenes' common folder, sanitised and de-duplicated.
+
+use std::os::unix::fs::MetadataExt;
+use std::path::{Component, Path, PathBuf};
+
+use crate::image_io::ImageIoError;
+
+/// The file marking a folder as a rendiff output set (replaceable as a
+/// whole).
+pub const MARKER: &str = ".rendiff-output";
+
+fn refused(path: &Path, message: impl Into<String>) -> ImageIoError {
+    ImageIoError::Refused {
+        path: path.to_path_buf(),
+        message: message.into(),
+    }
+}
+
+fn io(path: &Path, source: std::io::Error) -> ImageIoError {
+    ImageIoError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+/// Refuses an output file that is one of `inputs` (the same file: device
+/// and inode, through any link or spelling), or an output folder that is
+/// or holds one.
+///
+/// # Errors
+///
+/// [`ImageIoError::Refused`] naming the input.
+pub fn refuse_inputs(out: &Path, inputs: &[PathBuf]) -> Result<(), ImageIoError> {
+    let Ok(meta) = std::fs::metadata(out) else {
+        // Nothing there yet: it is no input (inputs exist).
+        return Ok(());
+    };
+    let id = (meta.dev(), meta.ino());
+    for input in inputs {
+        let Ok(m) = std::fs::metadata(input) else {
+            continue;
+        };
+        if (m.dev(), m.ino()) == id {
+            return Err(refused(
+                out,
+                format!(
+                    "is an input of this request ({}); rendiff does not write over its inputs",
+                    input.display()
+                ),
+            ));
+        }
+        if meta.is_dir()
+            && let (Ok(dir), Ok(file)) = (std::fs::canonicalize(out), std::fs::canonicalize(input))
+            && file.starts_with(&dir)
+        {
+            return Err(refused(
+                out,
+                format!(
+                    "holds an input of this request ({}); an output folder is replaced as a whole, so it must not hold inputs",
+                    input.display()
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// An output folder being written: files go into a fresh folder beside
+/// it, which [`OutputDir::commit`] swaps in as a whole.
+#[derive(Debug)]
+pub struct OutputDir {
+    target: PathBuf,
+    fresh: Option<tempfile::TempDir>,
+    _guard: crate::cleanup::TempGuard,
+}
+
+impl OutputDir {
+    /// Starts writing the set for `target`, which must be a new path, an
+    /// empty folder, or a folder rendiff wrote (it holds [`MARKER`]);
+    /// `inputs` may not be inside it.
+    ///
+    /// # Errors
+    ///
+    /// [`ImageIoError::Refused`] for a folder of other files, a file, or one
+    /// that holds an input; the I/O error of creating the fresh folder.
+    pub fn begin(target: &Path, inputs: &[PathBuf]) -> Result<OutputDir, ImageIoError> {
+        if let Ok(m) = std::fs::symlink_metadata(target) {
+            if m.file_type().is_symlink() {
+                return Err(refused(
+                    target,
+                    "is a symbolic link; name the output folder itself",
+                ));
+            }
+            if !m.is_dir() {
+                return Err(refused(target, "exists and is not a folder"));
+            }
+            refuse_inputs(target, inputs)?;
+            let empty = std::fs::read_dir(target)
+                .map_err(|e| io(target, e))?
+                .next()
+                .is_none();
+            if !empty && !target.join(MARKER).is_file() {
+                return Err(refused(
+                    target,
+                    format!(
+                        "holds files rendiff did not write (no {MARKER}); an output folder is replaced as a whole: name a new or empty folder"
+                    ),
+                ));
+            }
+        }
+        let parent = target
+            .parent()
+            .filter(|p| !p.as_os_str().is_empty())
+            .unwrap_or(Path::new("."));
+        if !parent.is_dir() {
+            return Err(refused(
+                target,
+                format!("the folder {} does not exist", parent.display()),
+            ));
+        }
+        let name = target
+            .file_name()
+            .map_or_else(|| "out".into(), |n| n.to_string_lossy().into_owned());
+        let prefix = format!(".{name}.");
+        let fresh = tempfile::Builder::new()
+            .prefix(&prefix)
+            .suffix(".tmp")
+            .tempdir_in(parent)
+            .map_err(|e| io(target, e))?;
+        let guard = crate::cleanup::TempGuard::new(fresh.path());
+        Ok(OutputDir {
+            target: target.to_path_buf(),
+            fresh: Some(fresh),
+            _guard: guard,
+        })
+    }
+
+    /// The folder to write the set into now.
+    #[must_use]
+    pub fn path(&self) -> &Path {
+        self.fresh.as_ref().map_or(&self.target, |f| f.path())
+    }
+
+    /// Swaps the written set in as the target folder (what was there is
+    /// removed after the swap).
+    ///
+    /// # Errors
+    ///
+    /// The I/O error; the target then holds its old set.
+    pub fn commit(mut self) -> Result<(), ImageIoError> {
+        let Some(fresh) = self.fresh.take() else {
+            return Ok(());
+        };
+        let marker = fresh.path().join(MARKER);
+        crate::image_io::write_atomic(&marker, |f| {
+            f.write_all(b"written by rendiff: this folder is replaced as a whole by the next run\n")
+        })?;
+        let from = fresh.keep();
+        let target = &self.target;
+        match std::fs::rename(&from, target) {
+            Ok(()) => return Ok(()),
+            Err(e)
+                if !matches!(
+                    rustix::io::Errno::from_io_error(&e),
+                    Some(rustix::io::Errno::NOTEMPTY | rustix::io::Errno::EXIST)
+                ) =>
+            {
+                let _ = std::fs::remove_dir_all(&from);
+                return Err(io(target, e));
+            }
+            Err(_) => {}
+        }
+        // The target holds a set: exchange the two at once.
+        let exchanged = rustix::fs::renameat_with(
+            rustix::fs::CWD,
+            &from,
+            rustix::fs::CWD,
+            target,
+            rustix::fs::RenameFlags::EXCHANGE,
+        );
+        match exchanged {
+            Ok(()) => {
+                // `from` now holds the old set.
+                let _ = std::fs::remove_dir_all(&from);
+                Ok(())
+            }
+            Err(_) => {
+                // No exchange on this file system: set the old one aside
+                // (a moment without the folder, never a mixed one).
+                let aside = from.with_extension("old");
+                let moved =
+                    std::fs::rename(target, &aside).and_then(|()| std::fs::rename(&from, target));
+                match moved {
+                    Ok(()) => {
+                        let _ = std::fs::remove_dir_all(&aside);
+                        Ok(())
+                    }
+                    Err(e) => {
+                        if aside.exists() && !target.exists() {
+                            let _ = std::fs::rename(&aside, target);
+                        }
+                        let _ = std::fs::remove_dir_all(&from);
+                        Err(io(target, e))
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// A folder name for each scene: its path relative to the scenes' common
+/// folder, without `.toml`, every component sanitised (only letters,
+/// digits, `-`, `_` and `.`; a leading dot, `.` and `..` made harmless)
+/// and joined by `__`; a name already taken gets `-2`, `-3`…. The names
+/// never leave the output folder and never collide.
+#[must_use]
+pub fn scene_folders(scenes: &[PathBuf]) -> Vec<String> {
+    let absolute: Vec<PathBuf> = scenes
+        .iter()
+        .map(|p| std::fs::canonicalize(p).unwrap_or_else(|_| p.clone()))
+        .collect();
+    let parents: Vec<&Path> = absolute
+        .iter()
+        .map(|p| p.parent().unwrap_or(Path::new("")))
+        .collect();
+    let common = parents.iter().skip(1).fold(
+        parents.first().map(|p| p.to_path_buf()).unwrap_or_default(),
+        |acc, p| {
+            acc.components()
+                .zip(p.components())
+                .take_while(|(a, b)| a == b)
+                .map(|(a, _)| a)
+                .collect()
+        },
+    );
+    let mut taken: Vec<String> = Vec::new();
+    absolute
+        .iter()
+        .map(|p| {
+            let rel = p.strip_prefix(&common).unwrap_or(p);
+            let parts: Vec<String> = rel
+                .components()
+                .filter_map(|c| match c {
+                    Component::Normal(s) => Some(s.to_string_lossy().into_owned()),
+                    _ => None,
+                })
+                .collect();
+            let n = parts.len();
+            let mut name = parts
+                .iter()
+                .enumerate()
+                .map(|(k, s)| {
+                    let s = if k + 1 == n {
+                        s.strip_suffix(".toml").unwrap_or(s).to_string()
+                    } else {
+                        s.clone()
+                    };
+                    sanitise(&s)
+                })
+                .collect::<Vec<_>>()
+                .join("__");
+            if name.is_empty() {
+                name = "scene".into();
+            }
+            let base = name.clone();
+            let mut k = 2;
+            while taken.contains(&name) {
+                name = format!("{base}-{k}");
+                k += 1;
+            }
+            taken.push(name.clone());
+            name
+        })
+        .collect()
+}
+
+/// A path component as a safe folder name.
+fn sanitise(s: &str) -> String {
+    let mut out: String = s
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.') {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    if out.is_empty() || out.starts_with('.') {
+        out.insert(0, '_');
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn scene_folders_stay_inside_and_apart() {
+        let names = scene_folders(&[
+            PathBuf::from("/s/a/x.toml"),
+            PathBuf::from("/s/b/x.toml"),
+            PathBuf::from("/s/a/...toml"),
+            PathBuf::from("/s/a/..toml"),
+            PathBuf::from("/s/a/x y\u{1b}].toml"),
+            PathBuf::from("/s/a/x.toml"),
+        ]);
+        assert_eq!(
+            names,
+            ["a__x", "b__x", "a___..", "a___.", "a__x_y__", "a__x-2"]
+        );
+        for n in &names {
+            assert!(!n.contains('/') && !n.starts_with('.') && n != ".." && n != ".");
+        }
+    }
+}
