@@ -49,7 +49,7 @@ bless:
 ## fuzz/corpus/TARGET, crashes in fuzz/artifacts/TARGET; commit both (the
 ## corpora replay in `make test`, and a crash stays as a regression case).
 FUZZ_SECONDS ?= 60
-FUZZ_TARGETS = scene_text obj_bytes png_bytes polygon triangles
+FUZZ_TARGETS = scene_text scene_files obj_bytes png_bytes polygon triangles
 fuzz:
 	@mkdir -p target/fuzz-logs; for t in $(FUZZ_TARGETS); do \
 		echo "== $$t"; \

@@ -96,6 +96,14 @@ pub fn interrupted() -> (usize, usize) {
             let _ = rustix::process::kill_process(pid, rustix::process::Signal::KILL);
         }
     }
+    // SIGKILL is delivered asynchronously: a child tearing down a large
+    // address space on a loaded machine can run on for a moment. Wait
+    // (2 s at most) until each is dead, so none outlives rendiff in its
+    // scratch folder.
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(2);
+    while r.children.iter().any(|(_, pid)| !dead(*pid)) && std::time::Instant::now() < deadline {
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
     for (_, path) in &r.temps {
         if path.is_dir() {
             let _ = std::fs::remove_dir_all(path);
@@ -104,6 +112,16 @@ pub fn interrupted() -> (usize, usize) {
         }
     }
     (r.children.len(), r.temps.len())
+}
+
+/// Whether process `pid` has ended (a zombie awaiting its parent, or
+/// gone), from the state field of `/proc/PID/stat`.
+fn dead(pid: u32) -> bool {
+    std::fs::read_to_string(format!("/proc/{pid}/stat")).map_or(true, |stat| {
+        stat.rsplit_once(')')
+            .and_then(|(_, rest)| rest.trim_start().chars().next())
+            .is_none_or(|state| matches!(state, 'Z' | 'X'))
+    })
 }
 
 static INTERRUPTED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);

@@ -51,6 +51,151 @@ pub fn scene_text(dir: &Path, data: &[u8]) {
             assert_finite(&r.frame, "scene");
         }
     }
+    let opts = crate::pov::ExportOptions {
+        geometry: crate::options::Geometry::Analytic,
+        max_depth: 5,
+        abridged: false,
+    };
+    if let Ok(export) = crate::pov::export(&job.scene, &job.tri, &opts) {
+        check_sdl(&export.text);
+    }
+}
+
+/// A scene with the files it refers to, across the file system: `data`
+/// is split at its first two `0xFF` bytes into scene text, the bytes of
+/// `m.obj` and the bytes of `t.png`, written into a fresh folder (with a
+/// link `l.png` to `t.png`, so one texture can be named two ways). The
+/// scene is loaded from disk through the same readers as the command line
+/// and, if it loads, rendered at 16×12 by both backends within a 64 MiB
+/// budget, exported to POV-Ray SDL (checked by [`check_sdl`]) and written
+/// as a PNG; afterwards the folder holds exactly what was put there and
+/// the one output.
+///
+/// # Panics
+///
+/// On a non-finite pixel, SDL that could run anything but the export's own
+/// code, or a file left behind.
+pub fn scene_files(data: &[u8]) {
+    let mut parts = data.splitn(3, |&b| b == 0xFF);
+    let text = parts.next().unwrap_or_default();
+    let obj = parts.next().unwrap_or_default();
+    let png = parts.next().unwrap_or_default();
+    let Ok(dir) = tempfile::tempdir() else {
+        return;
+    };
+    let d = dir.path();
+    let inputs = [("s.toml", text), ("m.obj", obj), ("t.png", png)];
+    for (name, bytes) in inputs {
+        if std::fs::write(d.join(name), bytes).is_err() {
+            return;
+        }
+    }
+    if std::os::unix::fs::symlink(d.join("t.png"), d.join("l.png")).is_err() {
+        return;
+    }
+    let ov = Overrides {
+        size: Some((16, 12)),
+        samples: Some(1),
+        memory_budget: Some(64 << 20),
+        ..Overrides::default()
+    };
+    let mut expected = vec!["l.png", "m.obj", "s.toml", "t.png"];
+    if let Ok(job) = Prepared::load(&d.join("s.toml"), &ov) {
+        for backend in [Backend::Raster, Backend::Ray] {
+            if let Ok(r) = job.render(backend) {
+                assert_finite(&r.frame, "scene files");
+            }
+        }
+        let opts = crate::pov::ExportOptions {
+            geometry: crate::options::Geometry::Mesh,
+            max_depth: 5,
+            abridged: false,
+        };
+        if let Ok(export) = crate::pov::export(&job.scene, &job.tri, &opts) {
+            check_sdl(&export.text);
+        }
+        if let Ok(r) = job.render(Backend::Ray) {
+            // The output's own name, and no other.
+            if r.frame
+                .write_png(&d.join("o.png"), crate::image_io::PngEncoding::Srgb8)
+                .is_ok()
+            {
+                expected.push("o.png");
+            }
+        }
+    }
+    let mut found: Vec<String> = std::fs::read_dir(d)
+        .map(|r| {
+            r.filter_map(Result::ok)
+                .map(|e| e.file_name().to_string_lossy().into_owned())
+                .collect()
+        })
+        .unwrap_or_default();
+    found.sort();
+    expected.sort_unstable();
+    assert_eq!(found, expected, "the folder changed beyond the one output");
+}
+
+/// Checks exported SDL the way POV-Ray's tokenizer would see it: the only
+/// directive is the first line's `#version 3.7;`; every string closes on
+/// its own line and holds no unescaped quote; comments are `//` to the end
+/// of a line; braces, brackets and parentheses balance and never close
+/// more than was opened. A scene string that escaped its literal or its
+/// comment (a file name with a quote, a name with a newline) breaks one of
+/// these.
+///
+/// # Panics
+///
+/// On the first rule broken, with the line.
+pub fn check_sdl(text: &str) {
+    let mut lines = text.lines();
+    assert_eq!(
+        lines.next(),
+        Some("#version 3.7;"),
+        "SDL must start with #version"
+    );
+    let mut depth = [0usize; 3];
+    for (k, line) in lines.enumerate() {
+        let n = k + 2;
+        let mut chars = line.chars().peekable();
+        while let Some(c) = chars.next() {
+            match c {
+                '/' if chars.peek() == Some(&'/') => break,
+                '"' => loop {
+                    match chars.next() {
+                        None => panic!("line {n}: a string runs past the end of its line"),
+                        Some('\\') => {
+                            assert!(
+                                matches!(chars.next(), Some('"' | '\\')),
+                                "line {n}: an escape other than \\\" or \\\\"
+                            );
+                        }
+                        Some('"') => break,
+                        Some(c) => {
+                            assert!((' '..='~').contains(&c), "line {n}: a string holds {c:?}")
+                        }
+                    }
+                },
+                '#' => panic!("line {n}: a directive outside a string or comment: {line}"),
+                '{' | '[' | '(' => depth["{[(".find(c).unwrap_or(0)] += 1,
+                '}' | ']' | ')' => {
+                    let d = &mut depth["}])".find(c).unwrap_or(0)];
+                    *d = d
+                        .checked_sub(1)
+                        .unwrap_or_else(|| panic!("line {n}: `{c}` closes nothing"));
+                }
+                c => assert!(
+                    c == '\t' || (' '..='~').contains(&c),
+                    "line {n}: {c:?} outside a string or comment"
+                ),
+            }
+        }
+    }
+    assert_eq!(
+        depth,
+        [0, 0, 0],
+        "unbalanced braces, brackets or parentheses"
+    );
 }
 
 /// An OBJ file's bytes.
@@ -236,5 +381,32 @@ mod tests {
         f.extend_from_slice(&[-1.0, -1.0, 0.0, 1.0, -1.0, 0.0, 0.0, 1.0, 0.0]);
         triangles(&encode(0, &f));
         triangles(&encode(0x80 | 0x40, &f));
+    }
+
+    #[test]
+    fn escaped_sdl_passes() {
+        check_sdl(
+            "#version 3.7;\n// a \"comment #x\n  pigment { image_map { png \"a\\\" #b.png\" } }\n",
+        );
+    }
+
+    #[test]
+    #[should_panic(expected = "a directive outside a string or comment")]
+    fn a_name_that_left_its_literal_is_found() {
+        check_sdl(
+            "#version 3.7;\npigment { image_map { png \"t.png\" } } #fopen F \"x\" write \"\" }\n",
+        );
+    }
+
+    #[test]
+    #[should_panic(expected = "runs past the end of its line")]
+    fn a_string_split_by_a_newline_is_found() {
+        check_sdl("#version 3.7;\npng \"a\n#b\"\n");
+    }
+
+    #[test]
+    #[should_panic(expected = "closes nothing")]
+    fn an_extra_brace_is_found() {
+        check_sdl("#version 3.7;\nsphere { 0, 1 } }\n");
     }
 }

@@ -413,12 +413,7 @@ pub fn decode_png_linear_within(
     expect: Option<(u32, u32)>,
     budget: &crate::budget::Budget,
 ) -> Result<LinearImage, ImageIoError> {
-    let limits = png::Limits {
-        bytes: usize::try_from(budget.remaining()).unwrap_or(usize::MAX),
-    };
-    let mut dec = png::Decoder::new_with_limits(std::io::Cursor::new(bytes), limits);
-    dec.set_transformations(png::Transformations::EXPAND);
-    let reader = dec.read_info().map_err(|e| png_err(path, e))?;
+    let reader = png_reader(bytes, budget).map_err(|e| png_err(path, e))?;
     let info = reader.info();
     let (w, h) = (info.width, info.height);
     if let Some((ew, eh)) = expect
@@ -442,6 +437,30 @@ pub fn decode_png_linear_within(
         budget.release(need - decoded);
     }
     result
+}
+
+/// A PNG reader past the header, expanding every colour type to 8 or 16
+/// bits per sample (palettes looked up, `tRNS` as alpha), its allocations
+/// capped at what `budget` has left, and the chunks rendiff never uses
+/// (ICC profiles, text) skipped rather than inflated: a 4 MB `iCCP` chunk
+/// that inflates to 4 GiB costs nothing.
+///
+/// # Errors
+///
+/// The decoder's error for bytes that are not a PNG or a header over the
+/// limits.
+pub(crate) fn png_reader<'a>(
+    bytes: &'a [u8],
+    budget: &crate::budget::Budget,
+) -> Result<png::Reader<std::io::Cursor<&'a [u8]>>, png::DecodingError> {
+    let limits = png::Limits {
+        bytes: usize::try_from(budget.remaining()).unwrap_or(usize::MAX),
+    };
+    let mut dec = png::Decoder::new_with_limits(std::io::Cursor::new(bytes), limits);
+    dec.set_transformations(png::Transformations::EXPAND);
+    dec.set_ignore_iccp_chunk(true);
+    dec.set_ignore_text_chunk(true);
+    dec.read_info()
 }
 
 fn decode_frame(

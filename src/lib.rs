@@ -14,7 +14,7 @@
 //! ```no_run
 //! use rendiff::{Backend, Overrides, Prepared};
 //! let job = Prepared::load("scenes/spheres.toml".as_ref(), &Overrides::default())?;
-//! let frame = job.render(Backend::Ray).frame;
+//! let frame = job.render(Backend::Ray)?.frame;
 //! frame.write_png("out.png".as_ref(), rendiff::image_io::PngEncoding::Srgb8)?;
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```

@@ -153,6 +153,33 @@ impl OutputDir {
         self.fresh.as_ref().map_or(&self.target, |f| f.path())
     }
 
+    /// Names the target, not the fresh folder, in an error met while
+    /// writing the set: `d/a.png` rather than `./.d.3qV5Nd.tmp/a.png`.
+    #[must_use]
+    pub fn relabel(&self, e: ImageIoError) -> ImageIoError {
+        let Some(fresh) = self.fresh.as_ref().map(tempfile::TempDir::path) else {
+            return e;
+        };
+        let rename = |path: PathBuf| match path.strip_prefix(fresh) {
+            Ok(rest) => self.target.join(rest),
+            Err(_) => path,
+        };
+        match e {
+            ImageIoError::Io { path, source } => ImageIoError::Io {
+                path: rename(path),
+                source,
+            },
+            ImageIoError::Png { path, message } => ImageIoError::Png {
+                path: rename(path),
+                message,
+            },
+            ImageIoError::Refused { path, message } => ImageIoError::Refused {
+                path: rename(path),
+                message,
+            },
+        }
+    }
+
     /// Swaps the written set in as the target folder (what was there is
     /// removed after the swap).
     ///

@@ -65,8 +65,9 @@ impl Texture {
 
     /// [`Texture::from_png_bytes`], reserving the texels in `budget` from
     /// the header's size before anything is decoded; the decoder's own
-    /// allocations (its buffers, and any chunk it inflates, such as an ICC
-    /// profile) are capped at what the budget has left.
+    /// allocations are capped at what the budget has left, and the chunks
+    /// a texture never uses (an ICC profile, text) are skipped, never
+    /// inflated.
     ///
     /// # Errors
     ///
@@ -76,61 +77,92 @@ impl Texture {
         bytes: &[u8],
         budget: &crate::budget::Budget,
     ) -> Result<Texture, TextureError> {
-        use image::ImageDecoder;
         let err = |m: String| TextureError { message: m };
-        let mut limits = image::Limits::default();
-        limits.max_image_width = Some(Self::MAX_SIDE);
-        limits.max_image_height = Some(Self::MAX_SIDE);
-        limits.max_alloc = Some(budget.remaining());
-        let mut decoder = image::codecs::png::PngDecoder::with_limits(
-            std::io::Cursor::new(bytes),
-            limits.clone(),
-        )
-        .map_err(|e| err(format!("not a readable PNG: {e}")))?;
-        let (w, h) = decoder.dimensions();
+        let reader = crate::image_io::png_reader(bytes, budget)
+            .map_err(|e| err(format!("not a readable PNG: {e}")))?;
+        let info = reader.info();
+        let (w, h) = (info.width, info.height);
         if w == 0 || h == 0 || w > Self::MAX_SIDE || h > Self::MAX_SIDE {
             return Err(err(format!(
                 "image is {w}x{h}; each side must be 1 … {}",
                 Self::MAX_SIDE
             )));
         }
-        // The texels stay; the decoded image and its RGBA copy are freed
-        // once converted: at most 16 B per texel more while decoding.
+        // The texels stay; the decoded rows (the expanded PNG's bytes per
+        // pixel) are freed once converted, so decoding needs that much
+        // more for a moment.
         let texels = u64::from(w) * u64::from(h);
+        let decoded = reader
+            .output_buffer_size()
+            .ok_or_else(|| err("image too large".into()))? as u64;
         budget
             .reserve(texels * Self::BYTES_PER_TEXEL, || {
                 format!("the {w}x{h} texture's texels")
             })
             .map_err(|e| err(e.to_string()))?;
-        if let Err(e) = budget.check(texels * Self::BYTES_PER_TEXEL, || {
-            format!("decoding the {w}x{h} texture")
-        }) {
+        if let Err(e) = budget.check(decoded, || format!("decoding the {w}x{h} texture")) {
             budget.release(texels * Self::BYTES_PER_TEXEL);
             return Err(err(e.to_string()));
         }
-        limits.max_alloc = Some(budget.remaining());
-        decoder.set_limits(limits).ok();
-        let color = decoder.color_type();
-        let img = image::DynamicImage::from_decoder(decoder)
-            .map_err(|e| err(format!("not a readable PNG: {e}")))?;
-        let has_alpha = color.has_alpha();
-        let grey = !color.has_color();
-        let bit_depth: u8 = if color.bytes_per_pixel() / color.channel_count() >= 2 {
-            16
-        } else {
-            8
+        let result = Self::decode(path, reader);
+        if result.is_err() {
+            budget.release(texels * Self::BYTES_PER_TEXEL);
+        }
+        result.map_err(err)
+    }
+
+    /// Decodes the frame `reader` stands at: every colour type expanded to
+    /// RGBA (grey replicated, a palette looked up, `tRNS` as alpha), each
+    /// sample divided by 255 or 65 535.
+    fn decode(
+        path: &Path,
+        mut reader: png::Reader<std::io::Cursor<&[u8]>>,
+    ) -> Result<Texture, String> {
+        let mut buf = vec![
+            0u8;
+            reader
+                .output_buffer_size()
+                .ok_or_else(|| "image too large".to_string())?
+        ];
+        let frame = reader
+            .next_frame(&mut buf)
+            .map_err(|e| format!("not a readable PNG: {e}"))?;
+        let (w, h) = (frame.width, frame.height);
+        let channels = frame.color_type.samples();
+        let sixteen = frame.bit_depth == png::BitDepth::Sixteen;
+        let has_alpha = matches!(
+            frame.color_type,
+            png::ColorType::GrayscaleAlpha | png::ColorType::Rgba
+        );
+        let grey = matches!(
+            frame.color_type,
+            png::ColorType::Grayscale | png::ColorType::GrayscaleAlpha
+        );
+        let sample = |i: usize| -> f32 {
+            if sixteen {
+                f32::from(u16::from_be_bytes([buf[2 * i], buf[2 * i + 1]])) / 65535.0
+            } else {
+                f32::from(buf[i]) / 255.0
+            }
         };
-        let texels: Vec<[f32; 4]> = if bit_depth == 16 {
-            img.to_rgba16()
-                .pixels()
-                .map(|p| p.0.map(|v| f32::from(v) / 65535.0))
-                .collect()
-        } else {
-            img.to_rgba8()
-                .pixels()
-                .map(|p| p.0.map(|v| f32::from(v) / 255.0))
-                .collect()
-        };
+        let n = (w as usize) * (h as usize);
+        let texels: Vec<[f32; 4]> = (0..n)
+            .map(|p| {
+                let b = p * channels;
+                match channels {
+                    1 => {
+                        let v = sample(b);
+                        [v, v, v, 1.0]
+                    }
+                    2 => {
+                        let v = sample(b);
+                        [v, v, v, sample(b + 1)]
+                    }
+                    3 => [sample(b), sample(b + 1), sample(b + 2), 1.0],
+                    _ => [sample(b), sample(b + 1), sample(b + 2), sample(b + 3)],
+                }
+            })
+            .collect();
         Ok(Texture {
             path: path.to_path_buf(),
             width: w,
@@ -138,7 +170,7 @@ impl Texture {
             texels,
             has_alpha,
             grey,
-            bit_depth,
+            bit_depth: if sixteen { 16 } else { 8 },
         })
     }
 

@@ -505,13 +505,15 @@ fn write_mesh2(o: &mut String, tri: &TriScene, object: usize, abridged: bool) ->
 }
 
 /// The path of an image as the scene file wrote it (relative to the
-/// scene's folder where possible).
+/// scene's folder where possible). A backslash is kept: on Unix it is a
+/// character of the name, not a separator, and rewriting it would make
+/// POV-Ray open another file ([`crate::escape::sdl_file_name`] refuses it).
 fn image_name(scene: &Scene, path: &std::path::Path) -> String {
     let base = scene.path.parent().unwrap_or(std::path::Path::new(""));
     path.strip_prefix(base)
         .unwrap_or(path)
         .to_string_lossy()
-        .replace('\\', "/")
+        .into_owned()
 }
 
 fn write_texture(

@@ -443,9 +443,23 @@ impl Scene {
             {
                 message = format!("duplicate key `{key}`: it is already defined in this table");
             }
+            if message.starts_with("carriage return") && text.contains('\r') && !text.contains('\n') {
+                message = "the lines end in a carriage return alone (classic Mac OS line endings), which TOML does not allow; convert them to LF or CRLF".into();
+            }
+            let mut at = e.span().map(|s| s.start);
+            if at.is_none()
+                && let Some(deep) = reader::deep_nesting(text)
+            {
+                at = Some(deep);
+                message = format!(
+                    "nested too deep: TOML keys of {} dotted parts, or arrays and inline tables {} deep, are beyond the parser's limit",
+                    reader::NESTING_LIMIT,
+                    reader::NESTING_LIMIT
+                );
+            }
             LoadError::Syntax {
                 path: path.to_path_buf(),
-                loc: src.loc(e.span().map_or(0, |s| s.start)),
+                loc: src.loc(at.unwrap_or(0)),
                 message,
             }
         })?;

@@ -362,7 +362,9 @@ pub(crate) fn number(v: &DeValue<'_>) -> Option<f64> {
             clippy::cast_precision_loss,
             reason = "integers are accepted where a float is expected (DESIGN.md §4)"
         )]
-        DeValue::Integer(i) => parse_int(i.as_str(), i.radix()).map(|x| x as f64),
+        DeValue::Integer(i) => parse_int(i.as_str(), i.radix())
+            .map(|x| x as f64)
+            .or_else(|| int_as_f64(i.as_str(), i.radix())),
         DeValue::Float(f) => {
             let s: String = f.as_str().chars().filter(|c| *c != '_').collect();
             let s = s.trim_start_matches('+');
@@ -388,6 +390,108 @@ fn parse_int(s: &str, radix: u32) -> Option<i64> {
     };
     let v = i64::from_str_radix(digits, radix).ok()?;
     Some(if neg { -v } else { v })
+}
+
+/// An integer beyond i64 as the nearest f64 (or infinity), so where a
+/// number is expected it meets the same range checks as a float of that
+/// size instead of being "not a number".
+fn int_as_f64(s: &str, radix: u32) -> Option<f64> {
+    let s: String = s.chars().filter(|c| *c != '_').collect();
+    let (neg, digits) = match s.strip_prefix('-') {
+        Some(d) => (true, d),
+        None => (false, s.trim_start_matches('+')),
+    };
+    if radix == 10 {
+        let v = digits.parse::<f64>().ok()?;
+        return Some(if neg { -v } else { v });
+    }
+    let digits = digits.get(2..).unwrap_or(digits);
+    let mut v = 0.0f64;
+    for c in digits.chars() {
+        v = v * f64::from(radix) + f64::from(c.to_digit(radix)?);
+    }
+    Some(if neg { -v } else { v })
+}
+
+/// The parser's nesting limit (toml 1.2: dotted keys of 80 parts, arrays
+/// and inline tables 80 deep), and where the text first reaches it —
+/// the parser reports it without a position.
+pub(crate) const NESTING_LIMIT: usize = 80;
+
+/// The byte offset where `text` first nests [`NESTING_LIMIT`] deep: a key
+/// (before `=`, or in a `[table]` header) of that many dotted parts, or
+/// that many open arrays and inline tables. Strings and comments are
+/// skipped.
+pub(crate) fn deep_nesting(text: &str) -> Option<usize> {
+    let b = text.as_bytes();
+    let (mut i, mut depth, mut parts) = (0usize, 0usize, 1usize);
+    // In a key: at the start of a line, in a header, or after `{` / `,`
+    // inside an inline table, until `=` (or `]` of the header).
+    let mut in_key = true;
+    while i < b.len() {
+        let c = b[i];
+        match c {
+            b'#' => {
+                while i < b.len() && b[i] != b'\n' {
+                    i += 1;
+                }
+                continue;
+            }
+            b'"' | b'\'' => {
+                let triple = b[i..].starts_with(if c == b'"' { b"\"\"\"" } else { b"'''" });
+                let q = c;
+                i += if triple { 3 } else { 1 };
+                while i < b.len() {
+                    if q == b'"' && b[i] == b'\\' {
+                        i += 2;
+                        continue;
+                    }
+                    if triple {
+                        if b[i..].starts_with(if q == b'"' { b"\"\"\"" } else { b"'''" }) {
+                            i += 3;
+                            break;
+                        }
+                    } else if b[i] == q || b[i] == b'\n' {
+                        i += 1;
+                        break;
+                    }
+                    i += 1;
+                }
+                continue;
+            }
+            b'\n' if depth == 0 => {
+                in_key = true;
+                parts = 1;
+            }
+            b'.' if in_key => {
+                parts += 1;
+                if parts >= NESTING_LIMIT {
+                    return Some(i);
+                }
+            }
+            b'=' => in_key = false,
+            b'[' | b'{' if c == b'{' || !in_key || depth > 0 => {
+                depth += 1;
+                if depth >= NESTING_LIMIT {
+                    return Some(i);
+                }
+                if c == b'{' {
+                    in_key = true;
+                    parts = 1;
+                }
+            }
+            b']' | b'}' => {
+                depth = depth.saturating_sub(1);
+            }
+            b',' if depth > 0 => {
+                in_key = true;
+                parts = 1;
+            }
+            _ => {}
+        }
+        i += 1;
+    }
+    None
 }
 
 pub(crate) fn type_name(v: &DeValue<'_>) -> &'static str {

@@ -17,7 +17,7 @@ const ALLOWED: &[(&str, &[&str])] = &[
     ("budget", &[]),
     ("cleanup", &[]),
     ("escape", &[]),
-    ("texture", &["budget", "color", "input", "math"]),
+    ("texture", &["budget", "color", "image_io", "input", "math"]),
     ("image_io", &["budget", "cleanup", "color", "input"]),
     ("output", &["cleanup", "image_io"]),
     ("camera", &["math"]),

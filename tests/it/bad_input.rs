@@ -333,3 +333,47 @@ fn every_subcommand_reports_every_bad_scene() {
         }
     }
 }
+
+/// A mesh too big for the memory budget is refused while it is read, at
+/// the line reached and with the figure, not once it is all in memory;
+/// the reader counts a triangle as tessellation does.
+#[test]
+fn a_mesh_over_the_budget_is_refused_at_the_line_reached() {
+    assert_eq!(
+        rendiff::scene::obj::BYTES_PER_TRIANGLE_TO_BE,
+        rendiff::tessellate::BYTES_PER_TRIANGLE
+    );
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("bad_input_budget");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    // 2 M faces (16 MB of text) would be 400 MB of triangles.
+    let mut obj = String::from("v 0 0 0\nv 1 0 0\nv 0 1 0\n");
+    obj += &"f 1 2 3\n".repeat(2 << 20);
+    std::fs::write(dir.join("big.obj"), obj).unwrap();
+    let scene = std::fs::read_to_string(
+        crate_root()
+            .join(CORPUS)
+            .join("31_obj_two_corner_face.toml"),
+    )
+    .unwrap()
+    .replace("assets/two_corner_face.obj", "big.obj");
+    std::fs::write(dir.join("big.toml"), scene).unwrap();
+    let budget = rendiff::budget::Budget::new(64 << 20);
+    let err = Scene::load_within(&dir.join("big.toml"), &budget).expect_err("over the budget");
+    let rendiff::scene::LoadError::Mesh {
+        line: Some(line),
+        message,
+        ..
+    } = &err
+    else {
+        panic!("{err}")
+    };
+    // 64 MiB less the 16 MB file, at 200 B per triangle: about 250 000.
+    assert!((200_000..300_000).contains(line), "{err}");
+    assert!(
+        message.starts_with(&format!("the mesh up to line {line} ("))
+            && message.contains("triangles to be)")
+            && message.contains("over the memory budget of 64.0 MiB"),
+        "{err}"
+    );
+}

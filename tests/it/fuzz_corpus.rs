@@ -50,6 +50,11 @@ fn scene_text_corpus_replays_cleanly() {
 }
 
 #[test]
+fn scene_files_corpus_replays_cleanly() {
+    replay("scene_files", rendiff::fuzz::scene_files);
+}
+
+#[test]
 fn obj_bytes_corpus_replays_cleanly() {
     replay("obj_bytes", rendiff::fuzz::obj_bytes);
 }

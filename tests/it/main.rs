@@ -21,6 +21,8 @@ mod fuzz_corpus;
 mod golden;
 /// The hazard scenes and the ray families behind them.
 mod hazards;
+/// The hostile corpus: inputs and file systems that must not hurt.
+mod hostile;
 /// Hidden lines: Appel's QI against ray counts and the z-buffer.
 mod lines;
 /// The painter's algorithm against the z-buffer.

@@ -237,6 +237,10 @@ pub struct PlanArgs {
     /// Show the plan with everything forced on.
     #[arg(long)]
     pub no_plan: bool,
+    /// Refuse scenes whose loading would need more memory than this many
+    /// GiB (default 4), before allocating it.
+    #[arg(long, value_name = "GIB")]
+    pub memory_budget: Option<f64>,
 }
 
 fn parse_size(s: &str) -> Result<(u32, u32), String> {

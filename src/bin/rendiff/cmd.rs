@@ -546,7 +546,10 @@ fn diff(a: &DiffArgs) -> Result<Outcome> {
             } else {
                 od.path().to_path_buf()
             };
-            diff::write_outputs(&r, &target, encoding(&a.flags))?;
+            diff::write_outputs(&r, &target, encoding(&a.flags)).map_err(|e| match e {
+                rendiff::Error::Image(e) => rendiff::Error::Image(od.relabel(e)),
+                e => e,
+            })?;
             entries.push((r.report.clone(), folders[k].clone()));
         }
         if !a.json {
@@ -559,7 +562,8 @@ fn diff(a: &DiffArgs) -> Result<Outcome> {
             let html = index_html(&entries);
             rendiff::image_io::write_atomic(&od.path().join("index.html"), |f| {
                 std::io::Write::write_all(f, html.as_bytes())
-            })?;
+            })
+            .map_err(|e| od.relabel(e))?;
         }
         od.commit()?;
     }
@@ -629,19 +633,7 @@ pub fn overrides(flags: &RenderFlags) -> Result<Overrides> {
         .map(str::parse::<rendiff::options::PainterSort>)
         .transpose()
         .map_err(|e| anyhow::anyhow!("--sort: {e}"))?;
-    let memory_budget = match flags.memory_budget {
-        None => None,
-        Some(g) if g.is_finite() && g > 0.0 && g <= 1e6 => {
-            #[expect(
-                clippy::cast_possible_truncation,
-                clippy::cast_sign_loss,
-                reason = "a positive number of GiB, at most 1e6"
-            )]
-            let bytes = (g * f64::from(1u32 << 30)) as u64;
-            Some(bytes)
-        }
-        Some(g) => bail!("--memory-budget {g}: expected a positive number of GiB"),
-    };
+    let memory_budget = memory_budget(flags.memory_budget)?;
     Ok(Overrides {
         size: flags.size,
         samples: flags.samples,
@@ -654,6 +646,23 @@ pub fn overrides(flags: &RenderFlags) -> Result<Overrides> {
         memory_budget,
         no_plan: flags.no_plan,
     })
+}
+
+/// `--memory-budget GIB` in bytes.
+fn memory_budget(gib: Option<f64>) -> Result<Option<u64>> {
+    match gib {
+        None => Ok(None),
+        Some(g) if g.is_finite() && g > 0.0 && g <= 1e6 => {
+            #[expect(
+                clippy::cast_possible_truncation,
+                clippy::cast_sign_loss,
+                reason = "a positive number of GiB, at most 1e6"
+            )]
+            let bytes = (g * f64::from(1u32 << 30)) as u64;
+            Ok(Some(bytes))
+        }
+        Some(g) => bail!("--memory-budget {g}: expected a positive number of GiB"),
+    }
 }
 
 fn encoding(flags: &RenderFlags) -> PngEncoding {
@@ -751,6 +760,7 @@ fn check_output_dir(out: &Path) -> Result<()> {
 fn plan(a: &PlanArgs) -> Result<Outcome> {
     let ov = Overrides {
         no_plan: a.no_plan,
+        memory_budget: memory_budget(a.memory_budget)?,
         ..Overrides::default()
     };
     let job = Prepared::load(&a.scene, &ov)?;

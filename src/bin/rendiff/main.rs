@@ -34,6 +34,7 @@ fn main() -> ExitCode {
     on_signals();
     let cli = args::Cli::parse();
     let result = std::panic::catch_unwind(|| cmd::run(cli));
+    report_peak_memory();
     if rendiff::cleanup::is_interrupted() {
         // The signal's thread is exiting with the signal's status; what
         // the run ended with (a killed child's failure) is not an answer.
@@ -61,8 +62,16 @@ fn main() -> ExitCode {
 /// On SIGINT, SIGTERM or SIGHUP: remove the temporaries not yet renamed
 /// into place, stop the POV-Ray children, and exit as the signal would
 /// (128 + its number), leaving only complete files behind.
+///
+/// SIGXFSZ (a file-size limit reached, `ulimit -f`) is caught rather than
+/// left to kill the process: the write then fails with EFBIG and is
+/// reported like a full disk, with the old outputs kept.
 fn on_signals() {
-    use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
+    use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM, SIGXFSZ};
+    let _ = signal_hook::flag::register(
+        SIGXFSZ,
+        std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false)),
+    );
     let Ok(mut signals) = signal_hook::iterator::Signals::new([SIGINT, SIGTERM, SIGHUP]) else {
         return;
     };
@@ -72,6 +81,22 @@ fn on_signals() {
             std::process::exit(128 + sig);
         }
     });
+}
+
+/// With `RENDIFF_PEAK_RSS` set, the process's peak resident memory
+/// (`VmHWM` of /proc/self/status, read by the process itself just before
+/// it exits, so nothing is missed) on standard error as `peak RSS: N kB`:
+/// how the tests measure the memory of a refused or completed request.
+fn report_peak_memory() {
+    use std::io::Write;
+    if std::env::var_os("RENDIFF_PEAK_RSS").is_none() {
+        return;
+    }
+    let status = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
+    if let Some(line) = status.lines().find(|l| l.starts_with("VmHWM:")) {
+        let kb = line.trim_start_matches("VmHWM:").trim();
+        let _ = writeln!(std::io::stderr(), "peak RSS: {kb}");
+    }
 }
 
 /// The error and its causes, each once, as one paragraph.
