@@ -86,7 +86,9 @@ pub fn scene_files(data: &[u8]) {
     let d = dir.path();
     let inputs = [("s.toml", text), ("m.obj", obj), ("t.png", png)];
     for (name, bytes) in inputs {
-        if std::fs::write(d.join(name), bytes).is_err() {
+        let written =
+            crate::image_io::write_atomic(&d.join(name), |f| std::io::Write::write_all(f, bytes));
+        if written.is_err() {
             return;
         }
     }
