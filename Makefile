@@ -7,16 +7,16 @@ export CARGO_TERM_COLOR ?= never
 ## The whole test suite: formatting, lints, unit, integration and doc
 ## tests, then (where POV-Ray is installed) the check that every stored
 ## POV-Ray reference is current and still what POV-Ray renders.
-test: lint unit golden-check
+test: lint unit doc golden-check
 
 lint:
 	$(CARGO) fmt --all --check
 	$(CARGO) fmt --manifest-path peers/Cargo.toml --check
 	$(CARGO) fmt --manifest-path fuzz/Cargo.toml --check
-	$(CARGO) clippy --all-targets -- -D warnings
+	$(CARGO) clippy --workspace --all-targets -- -D warnings
 
 unit:
-	$(CARGO) test
+	$(CARGO) test --workspace
 
 ## Re-render the POV-Ray references of the bundled scenes (golden/pov)
 ## and of the hazard scenes (tests/data/hazards/golden).
@@ -84,7 +84,7 @@ peers:
 	$(CARGO) run --release --manifest-path peers/Cargo.toml -- povray
 
 doc:
-	RUSTDOCFLAGS="-D warnings" $(CARGO) doc --no-deps
+	RUSTDOCFLAGS="-D warnings" $(CARGO) doc --workspace --no-deps
 
 clean:
 	$(CARGO) clean

@@ -34,12 +34,12 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
-use crate::color::{Rgb, to_srgb8};
-use crate::image_io::{self, ImageIoError};
-use crate::options::{DepthFormat, Geometry, ShadowMode};
-use crate::pov::golden::{self, Variant};
-use crate::scene::{Scene, Shape};
-use crate::{Backend, Error, Overrides, Prepared, Work};
+use rendiff::color::{Rgb, to_srgb8};
+use rendiff::image_io::{self, ImageIoError};
+use rendiff::options::{DepthFormat, Geometry, ShadowMode};
+use rendiff::pov::golden::{self, Variant};
+use rendiff::scene::{Scene, Shape};
+use rendiff::{Backend, Error, Overrides, Prepared, Work};
 
 /// A setting that trades time for error.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -519,7 +519,7 @@ impl Runner {
         })
     }
 
-    fn render(&self) -> Result<crate::Rendered, Error> {
+    fn render(&self) -> Result<rendiff::Rendered, Error> {
         match &self.pool {
             Some(p) => p.install(|| self.job.render(self.backend)),
             None => self.job.render(self.backend),

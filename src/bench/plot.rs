@@ -5,7 +5,7 @@ use plotters::coord::ranged1d::SegmentValue;
 use plotters::prelude::*;
 
 use super::{Row, Sweep, pareto_front};
-use crate::Backend;
+use rendiff::Backend;
 
 /// Why a plot could not be drawn.
 #[derive(Debug, thiserror::Error)]

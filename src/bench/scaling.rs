@@ -15,10 +15,10 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use crate::accel::{Accel, AccelOptions};
-use crate::image_io::{self, ImageIoError};
-use crate::scene::Scene;
-use crate::{Backend, Error, GATE_EPS, Overrides, Prepared, ray};
+use rendiff::accel::{Accel, AccelOptions};
+use rendiff::image_io::{self, ImageIoError};
+use rendiff::scene::Scene;
+use rendiff::{Backend, Error, GATE_EPS, Overrides, Prepared, ray};
 
 /// What to measure.
 #[derive(Clone, Debug)]
@@ -271,7 +271,7 @@ pub fn run(opts: &ScalingOptions, progress: &dyn Fn(&str)) -> Result<Vec<Scaling
                 if k > 0 {
                     times.push(r.time_ms);
                 }
-                if let crate::Work::Ray { rays: s, .. } = r.work {
+                if let rendiff::Work::Ray { rays: s, .. } = r.work {
                     rays = s.primary + s.shadow + s.secondary;
                 }
             }

@@ -103,7 +103,7 @@ fn scales_render_or_are_refused_at_the_stated_thresholds() {
     let max_coordinate = rendiff::scene::MAX_COORDINATE;
     // Well inside, from 1e-9 to 1e10 times the scene.
     for scale in [1e-9, 1e-5, 1e-2, 1e3, 1e6, 1e10] {
-        let job = Prepared::from_scene(base.scaled(scale, DVec3::ZERO), &small())
+        let job = Prepared::from_scene(base.scaled(scale, DVec3::ZERO).unwrap(), &small())
             .unwrap_or_else(|e| panic!("×{scale}: {e}"));
         assert!(both_agree(&job, &format!("×{scale}")) > 1000);
     }
@@ -118,7 +118,7 @@ fn scales_render_or_are_refused_at_the_stated_thresholds() {
         (1e-30, false),
         (1e30, false),
     ] {
-        match Prepared::from_scene(base.scaled(scale, DVec3::ZERO), &small()) {
+        match Prepared::from_scene(base.scaled(scale, DVec3::ZERO).unwrap(), &small()) {
             Ok(job) => {
                 assert!(ok, "×{scale:e}: accepted beyond the threshold");
                 both_agree(&job, &format!("×{scale:e}"));
@@ -138,7 +138,7 @@ fn scales_render_or_are_refused_at_the_stated_thresholds() {
     let d_max = extent / (MIN_EXTENT_STEPS * f64::from(f32::EPSILON));
     for (distance, ok) in [(d_max * 0.5, true), (d_max * 2.0, false)] {
         let offset = DVec3::new(distance, 0.0, 0.0);
-        match Prepared::from_scene(base.scaled(1.0, offset), &small()) {
+        match Prepared::from_scene(base.scaled(1.0, offset).unwrap(), &small()) {
             Ok(job) => {
                 assert!(ok, "moved {distance:e}: accepted");
                 both_agree(&job, &format!("moved {distance:e}"));

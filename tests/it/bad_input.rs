@@ -196,20 +196,33 @@ fn library_gives_the_same_errors() {
                     !AFTER_TESSELLATION.contains(&name),
                     "{rel}: now fails in Scene::load; update AFTER_TESSELLATION"
                 );
-                e.to_string()
+                chain(&e)
             }
             Ok(_) => {
                 assert!(
                     AFTER_TESSELLATION.contains(&name),
                     "{rel}: Scene::load accepted a bad scene"
                 );
-                Prepared::load(&path, &Overrides::default())
-                    .expect_err("Prepared::load must reject it")
-                    .to_string()
+                chain(
+                    &Prepared::load(&path, &Overrides::default())
+                        .expect_err("Prepared::load must reject it"),
+                )
             }
         };
         assert_eq!(message, cli, "{rel}: library and CLI messages differ");
     }
+}
+
+/// An error and its sources joined by ": ", as a program prints it (an
+/// error's Display never repeats its source).
+fn chain(e: &dyn std::error::Error) -> String {
+    let mut parts = vec![e.to_string()];
+    let mut cause = e.source();
+    while let Some(c) = cause {
+        parts.push(c.to_string());
+        cause = c.source();
+    }
+    parts.join(": ")
 }
 
 /// (c) The corpus cannot silently shrink.
@@ -248,10 +261,8 @@ fn missing_scene_file() {
     assert_eq!(stderr.lines().count(), 1, "{stderr}");
     let message = stderr.trim_end();
     let lib = Scene::load(Path::new(&rel)).expect_err("a missing file is an error");
-    assert_eq!(
-        message.strip_prefix("error: "),
-        Some(lib.to_string().as_str())
-    );
+    // The library's error and its source, as the binary prints them.
+    assert_eq!(message.strip_prefix("error: "), Some(chain(&lib).as_str()));
     // The OS's wording differs between systems; the start is ours.
     assert!(
         message.starts_with(&format!("error: {rel}: could not read the file: ")),

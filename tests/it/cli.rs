@@ -450,7 +450,7 @@ fn bench_writes_the_results_and_the_plots() {
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
     let csv = std::fs::read_to_string(dir.join("results.csv")).unwrap();
     let mut lines = csv.lines();
-    assert_eq!(lines.next(), Some(rendiff::bench::CSV_HEADER));
+    assert_eq!(lines.next(), Some(rendiff_cli::bench::CSV_HEADER));
     let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
     // spheres: plan 2×2, shadows 2 (raster); glass: plan 2×2, shadows 2,
     // max_depth 2 (ray).

@@ -11,42 +11,79 @@ use rendiff::{Backend, Overrides};
 
 use crate::util::{bundled_scenes, load};
 
-#[test]
-fn every_bundled_scene_agrees() {
-    let scenes = bundled_scenes();
-    assert!(scenes.len() >= 12, "{} bundled scenes", scenes.len());
-    for name in &scenes {
-        let job = load(name, &Overrides::default());
-        let r = diff::diff(
-            &job,
-            name,
-            &Side::Backend(Backend::Raster),
-            &Side::Backend(Backend::Ray),
-        )
-        .unwrap();
-        let v = r.report.visibility.expect("two frames");
-        assert_eq!(
-            v.real,
-            0,
-            "{name}: real visibility mismatches\n{}",
-            r.report.summary()
-        );
-        assert_eq!(
-            r.report.shading.over_threshold,
-            0,
-            "{name}: shading outside the bound\n{}",
-            r.report.summary()
-        );
-        assert!(r.report.shading.max <= r.report.tolerance.shading_max);
-        assert_eq!(
-            v.total(),
-            r.report.samples,
-            "{name}: classes must sum to the samples"
-        );
-        assert_no_false_pass(name, &r);
-        insta::assert_snapshot!(format!("raster_vs_ray__{name}"), r.report.stable_summary());
-    }
+/// Raster against ray on one bundled scene: no real mismatch, shading
+/// within the bound, classes summing to the samples, no false pass, and
+/// the stable summary as a snapshot.
+fn bundled_scene_agrees(name: &str) {
+    let job = load(name, &Overrides::default());
+    let r = diff::diff(
+        &job,
+        name,
+        &Side::Backend(Backend::Raster),
+        &Side::Backend(Backend::Ray),
+    )
+    .unwrap();
+    let v = r.report.visibility.expect("two frames");
+    assert_eq!(
+        v.real,
+        0,
+        "{name}: real visibility mismatches\n{}",
+        r.report.summary()
+    );
+    assert_eq!(
+        r.report.shading.over_threshold,
+        0,
+        "{name}: shading outside the bound\n{}",
+        r.report.summary()
+    );
+    assert!(r.report.shading.max <= r.report.tolerance.shading_max);
+    assert_eq!(
+        v.total(),
+        r.report.samples,
+        "{name}: classes must sum to the samples"
+    );
+    assert_no_false_pass(name, &r);
+    insta::assert_snapshot!(format!("raster_vs_ray__{name}"), r.report.stable_summary());
 }
+
+/// One test per bundled scene (`cargo test teapot` runs one; a failing
+/// scene hides no other), and a check that the list is every scene.
+macro_rules! every_bundled_scene {
+    ($($scene:ident),* $(,)?) => {
+        mod bundled {
+            $(
+                #[test]
+                fn $scene() {
+                    super::bundled_scene_agrees(stringify!($scene));
+                }
+            )*
+        }
+
+        #[test]
+        fn every_bundled_scene_has_its_test() {
+            let listed = [$(stringify!($scene)),*];
+            assert_eq!(bundled_scenes(), listed, "add the new scene to every_bundled_scene!");
+        }
+    };
+}
+
+every_bundled_scene!(
+    bumps,
+    bunny,
+    dense,
+    glass,
+    grazing,
+    inside,
+    menagerie,
+    near_plane,
+    painter_cycle,
+    painter_floor,
+    polygons,
+    spheres,
+    superellipsoids,
+    teapot,
+    textured,
+);
 
 /// No false pass: a passing verdict between two frames allows at most
 /// 0.5 % of the pixels to differ beyond 2/255 (8-bit sRGB), plus one pixel
@@ -275,7 +312,7 @@ fn shading_is_bit_identical_where_both_see_the_same_triangle() {
             s.camera.projection = ProjectionDesc::Perspective { fov_y_deg: 170.0 };
             s
         };
-        let moved = base.scaled(1.0, DVec3::new(1e4, -1e4, 1e4));
+        let moved = base.scaled(1.0, DVec3::new(1e4, -1e4, 1e4)).unwrap();
         for (what, scene, samples, size) in [
             ("fov 170", wide, None, Some((160, 120))),
             ("8x8 samples", base.clone(), Some(8), Some((80, 60))),

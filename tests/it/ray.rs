@@ -327,8 +327,11 @@ fn visibility_is_the_same_at_any_scale() {
             (1.0, DVec3::new(1e4, -1e4, 1e4)),
             (1e3, DVec3::new(1e4, 0.0, -1e4)),
         ] {
-            let job = Prepared::from_scene(base_scene.scaled(scale, offset), &Overrides::default())
-                .unwrap();
+            let job = Prepared::from_scene(
+                base_scene.scaled(scale, offset).unwrap(),
+                &Overrides::default(),
+            )
+            .unwrap();
             assert_eq!(
                 job.tri.len(),
                 base.tri.len(),
@@ -762,9 +765,11 @@ radius = 1.0
         (1.0, DVec3::new(1e4, -1e4, 1e4)),
         (1e3, DVec3::new(-1e4, 1e4, 0.0)),
     ] {
-        let job = Prepared::from_scene(base.scaled(scale, offset), &Overrides::default()).unwrap();
+        let job = Prepared::from_scene(base.scaled(scale, offset).unwrap(), &Overrides::default())
+            .unwrap();
         let job0 =
-            Prepared::from_scene(base0.scaled(scale, offset), &Overrides::default()).unwrap();
+            Prepared::from_scene(base0.scaled(scale, offset).unwrap(), &Overrides::default())
+                .unwrap();
         let (f, f0) = (
             job.render(Backend::Ray).unwrap().frame,
             job0.render(Backend::Ray).unwrap().frame,

@@ -139,7 +139,7 @@ fn lines(a: &LinesArgs) -> Result<Outcome> {
 }
 
 fn bench_scaling(a: &BenchArgs) -> Result<Outcome> {
-    use rendiff::bench::{plot, scaling};
+    use rendiff_cli::bench::{plot, scaling};
     let mut opts = scaling::ScalingOptions {
         repeats: a.repeats,
         ..scaling::ScalingOptions::default()
@@ -182,7 +182,7 @@ fn bench_scaling(a: &BenchArgs) -> Result<Outcome> {
 }
 
 fn bench(a: &BenchArgs) -> Result<Outcome> {
-    use rendiff::bench::{self, Bench, BenchOptions, Sweep, plot};
+    use rendiff_cli::bench::{self, Bench, BenchOptions, Sweep, plot};
     if a.scaling {
         return bench_scaling(a);
     }
@@ -677,7 +677,7 @@ fn render(a: &RenderArgs) -> Result<Outcome> {
     let backend: Backend = a
         .backend
         .parse()
-        .map_err(|e: String| anyhow::anyhow!("--backend: {e}"))?;
+        .map_err(|e: rendiff::options::ParseOptionError| anyhow::anyhow!("--backend: {e}"))?;
     let ov = overrides(&a.flags)?;
     if ov.geometry == Some(Geometry::Analytic) && backend != Backend::Ray {
         bail!(

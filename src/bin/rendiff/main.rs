@@ -99,14 +99,11 @@ fn report_peak_memory() {
     }
 }
 
-/// The error and its causes, each once, as one paragraph.
+/// The error and its causes as one paragraph (no error's Display repeats
+/// its source, so each appears once).
 fn one_paragraph(err: &anyhow::Error) -> String {
-    let mut parts: Vec<String> = Vec::new();
-    for cause in err.chain() {
-        let s = cause.to_string();
-        if !parts.iter().any(|p| p.contains(&s)) {
-            parts.push(s);
-        }
-    }
-    parts.join(": ")
+    err.chain()
+        .map(ToString::to_string)
+        .collect::<Vec<_>>()
+        .join(": ")
 }

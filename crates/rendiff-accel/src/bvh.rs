@@ -1,0 +1,811 @@
+//! A 4-wide bounding volume hierarchy over triangles.
+//!
+//! Build: a binary tree by binned SAH (Wald 2007: 16 bins per axis over the
+//! centroid bounds, object-median splits where every centroid coincides),
+//! split in parallel with `rayon::join` above 4096 primitives, then
+//! collapsed into 4-wide nodes (each node adopts the grandchildren of its
+//! largest inner children) with their child boxes stored as structure-of-
+//! arrays `Vec4`s, so one node visit tests four boxes with SSE.
+//!
+//! Traversal: ordered (nearest child first) with a precomputed inverse
+//! direction; `t_far` of every box is enlarged by `1 + 2γ(3)` (Ize 2013,
+//! pbrt-v4), so rounding never culls a box the ray really enters: the BVH
+//! finds exactly the hits a linear scan finds.
+
+use glam::Vec4;
+
+use super::triangle::{RayPrecomp, TriHit, TriPack, candidates, f32_at_least, intersect};
+use rendiff_core::math::{Aabb, Ray64, Vec3, gamma, to_f64};
+
+/// Child slot encoding: the high bit marks a leaf.
+const LEAF: u32 = 1 << 31;
+/// An empty child slot.
+const EMPTY: u32 = u32::MAX;
+
+/// Largest number of triangles in a leaf.
+pub(crate) const MAX_LEAF: usize = 8;
+/// Bins per axis of the SAH build.
+const BINS: usize = 16;
+/// Relative cost of a node visit against a triangle test.
+const TRAVERSAL_COST: f32 = 1.0;
+/// Subtrees larger than this are built in parallel.
+const PARALLEL_THRESHOLD: usize = 4096;
+
+/// A 4-wide node.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Node4 {
+    min_x: Vec4,
+    max_x: Vec4,
+    min_y: Vec4,
+    max_y: Vec4,
+    min_z: Vec4,
+    max_z: Vec4,
+    /// Inner node index, `LEAF | first pack` or `EMPTY`.
+    child: [u32; 4],
+    /// Bit k set when child k exists: an empty slot's box (all +∞) would
+    /// pass the slab test for a ray with positive direction components
+    /// and no far bound.
+    used: u32,
+    /// Padding: a node is two 64-byte cache lines.
+    _pad: [u32; 3],
+}
+
+/// The BVH: nodes and triangle data in leaf order.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Bvh {
+    nodes: Vec<Node4>,
+    /// The root: an inner node index or a leaf encoding.
+    root: u32,
+    root_count: u32,
+    /// The triangles in leaf order, four to a pack; a leaf is a run of
+    /// packs.
+    packs: Vec<TriPack>,
+    /// Triangle id (in the `TriScene`) of each lane: `ids[4·pack + lane]`.
+    ids: Vec<u32>,
+    /// Triangles.
+    triangles: usize,
+    bounds: Aabb,
+    depth: u32,
+}
+
+/// Statistics of a built BVH.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct BvhStats {
+    /// Triangles.
+    pub triangles: usize,
+    /// 4-wide nodes.
+    pub nodes: usize,
+    /// Leaves.
+    pub leaves: usize,
+    /// Depth in 4-wide nodes.
+    pub depth: u32,
+    /// Bytes held (nodes + triangle copies + ids).
+    pub bytes: usize,
+}
+
+/// A closest hit.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BvhHit {
+    /// Ray parameter (rounded from `t64`).
+    pub t: f32,
+    /// Ray parameter in `f64`.
+    pub t64: f64,
+    /// Triangle id.
+    pub id: u32,
+    /// Barycentrics from the watertight test.
+    pub b: [f32; 3],
+}
+
+/// A primitive reference for the build: its box as two SSE vectors, the
+/// reference index kept in the `w` lane of `lo` (32 bytes, moved in place
+/// by the partitions, so the build streams through memory).
+#[derive(Clone, Copy, Debug)]
+struct PrimRef {
+    lo: Vec4,
+    hi: Vec4,
+}
+
+impl PrimRef {
+    fn index(&self) -> u32 {
+        self.lo.w.to_bits()
+    }
+
+    /// Twice the centroid (the factor 2 cancels in the binning).
+    fn centroid2(&self) -> Vec4 {
+        self.lo + self.hi
+    }
+}
+
+/// A box as two SSE vectors (w lanes unused).
+#[derive(Clone, Copy, Debug)]
+struct Box4 {
+    lo: Vec4,
+    hi: Vec4,
+}
+
+impl Box4 {
+    const EMPTY: Box4 = Box4 {
+        lo: Vec4::splat(f32::INFINITY),
+        hi: Vec4::splat(f32::NEG_INFINITY),
+    };
+
+    fn grow(&mut self, lo: Vec4, hi: Vec4) {
+        self.lo = self.lo.min(lo);
+        self.hi = self.hi.max(hi);
+    }
+
+    fn half_area(&self) -> f32 {
+        let e = (self.hi - self.lo).max(Vec4::ZERO);
+        e.x * e.y + e.y * e.z + e.z * e.x
+    }
+
+    fn aabb(&self) -> Aabb {
+        Aabb::from_min_max(self.lo.truncate(), self.hi.truncate())
+    }
+}
+
+enum BNode {
+    Leaf {
+        bounds: Aabb,
+        start: usize,
+        count: usize,
+    },
+    Inner {
+        bounds: Aabb,
+        children: Box<[BNode; 2]>,
+    },
+}
+
+impl BNode {
+    fn bounds(&self) -> Aabb {
+        match self {
+            BNode::Leaf { bounds, .. } | BNode::Inner { bounds, .. } => *bounds,
+        }
+    }
+}
+
+/// What leaf emission needs: the ids in leaf order and the vertices.
+struct Leaves<'a, F> {
+    order: &'a [u32],
+    tri: &'a F,
+}
+
+/// Binary depth beyond which splits are object medians, whatever the SAH
+/// says: it bounds the tree depth (and the traversal stack) for any input.
+const SAH_DEPTH_LIMIT: u32 = 40;
+
+/// The bounds of a set of primitives and of their (doubled) centroids.
+fn bounds_of(prims: &[PrimRef]) -> (Box4, Box4) {
+    let mut bounds = Box4::EMPTY;
+    let mut cbounds = Box4::EMPTY;
+    for p in prims {
+        bounds.grow(p.lo, p.hi);
+        let c = p.centroid2();
+        cbounds.grow(c, c);
+    }
+    (bounds, cbounds)
+}
+
+/// Builds the subtree of `prims`, whose bounds and centroid bounds the
+/// caller has computed (the partition of the parent produces them).
+fn build_binary(
+    prims: &mut [PrimRef],
+    offset: usize,
+    depth: u32,
+    (bounds, cbounds): (Box4, Box4),
+) -> BNode {
+    let n = prims.len();
+    let leaf = BNode::Leaf {
+        bounds: bounds.aabb(),
+        start: offset,
+        count: n,
+    };
+    if n <= 2 {
+        return leaf;
+    }
+    let extent = cbounds.hi - cbounds.lo;
+    // Binned SAH over the three axes at once: one pass over the primitives.
+    // Small nodes use half the bins (the sweep, not the binning, dominates there).
+    let nb = if n > 64 { BINS } else { BINS / 2 };
+    #[expect(clippy::cast_precision_loss, reason = "nb ≤ 16")]
+    let nbf = nb as f32;
+    let scale = Vec4::new(
+        if extent.x > 0.0 { nbf / extent.x } else { 0.0 },
+        if extent.y > 0.0 { nbf / extent.y } else { 0.0 },
+        if extent.z > 0.0 { nbf / extent.z } else { 0.0 },
+        0.0,
+    );
+    // Two sets of bins, for even and odd primitives, merged afterwards:
+    // neighbours often fall in the same bin, and one set would chain every
+    // update to the previous one through memory.
+    let mut bin_bounds = [[[Box4::EMPTY; BINS]; 3]; 2];
+    let mut bin_count = [[[0u32; BINS]; 3]; 2];
+    let mut pairs = prims.chunks_exact(2);
+    for pair in &mut pairs {
+        let (p, q) = (&pair[0], &pair[1]);
+        let bp = bins_of(p.centroid2(), cbounds.lo, scale, nb);
+        let bq = bins_of(q.centroid2(), cbounds.lo, scale, nb);
+        for axis in 0..3 {
+            bin_bounds[0][axis][bp[axis]].grow(p.lo, p.hi);
+            bin_count[0][axis][bp[axis]] += 1;
+            bin_bounds[1][axis][bq[axis]].grow(q.lo, q.hi);
+            bin_count[1][axis][bq[axis]] += 1;
+        }
+    }
+    for p in pairs.remainder() {
+        let b = bins_of(p.centroid2(), cbounds.lo, scale, nb);
+        for axis in 0..3 {
+            bin_bounds[0][axis][b[axis]].grow(p.lo, p.hi);
+            bin_count[0][axis][b[axis]] += 1;
+        }
+    }
+    let [mut bin_bounds, odd_bounds] = bin_bounds;
+    let [mut bin_count, odd_count] = bin_count;
+    for axis in 0..3 {
+        for b in 0..nb {
+            let o = odd_bounds[axis][b];
+            bin_bounds[axis][b].grow(o.lo, o.hi);
+            bin_count[axis][b] += odd_count[axis][b];
+        }
+    }
+    // Triangles are tested four at a time: a leaf costs its packs.
+    #[expect(clippy::cast_precision_loss, reason = "pack counts below 2^24")]
+    let packs = |k: u32| k.div_ceil(4) as f32;
+    let leaf_cost = packs(u32::try_from(n).unwrap_or(u32::MAX));
+    let parent_area = bounds.half_area().max(f32::MIN_POSITIVE);
+    let mut best: Option<(usize, usize, f32)> = None; // axis, split bin, cost
+    for axis in 0..3 {
+        if extent[axis] <= 0.0 || !extent[axis].is_finite() {
+            continue;
+        }
+        // Sweep from the right, then from the left.
+        let mut right_area = [0.0f32; BINS];
+        let mut right_count = [0u32; BINS];
+        let mut acc = Box4::EMPTY;
+        let mut cnt = 0;
+        for b in (1..nb).rev() {
+            acc.grow(bin_bounds[axis][b].lo, bin_bounds[axis][b].hi);
+            cnt += bin_count[axis][b];
+            right_area[b] = acc.half_area();
+            right_count[b] = cnt;
+        }
+        let mut acc = Box4::EMPTY;
+        let mut cnt = 0;
+        for b in 1..nb {
+            acc.grow(bin_bounds[axis][b - 1].lo, bin_bounds[axis][b - 1].hi);
+            cnt += bin_count[axis][b - 1];
+            if cnt == 0 || right_count[b] == 0 {
+                continue;
+            }
+            let cost = TRAVERSAL_COST
+                + (acc.half_area() * packs(cnt) + right_area[b] * packs(right_count[b]))
+                    / parent_area;
+            if best.is_none_or(|(_, _, c)| cost < c) {
+                best = Some((axis, b, cost));
+            }
+        }
+    }
+    let best = if depth >= SAH_DEPTH_LIMIT && n > MAX_LEAF {
+        None
+    } else {
+        best
+    };
+    let (mid, lb, rb) = match best {
+        Some((axis, split, cost)) if cost < leaf_cost || n > MAX_LEAF => partition(prims, |p| {
+            bins_of(p.centroid2(), cbounds.lo, scale, nb)[axis] < split
+        }),
+        Some(_) => return leaf,
+        None if n <= MAX_LEAF => return leaf,
+        None => {
+            // Every centroid coincides, or the depth limit is reached: split
+            // by count along the widest centroid axis to bound the depth.
+            let axis = (0..3)
+                .max_by(|&a, &b| extent[a].total_cmp(&extent[b]))
+                .unwrap_or(0);
+            prims.sort_unstable_by(|a, b| a.centroid2()[axis].total_cmp(&b.centroid2()[axis]));
+            let (l, r) = prims.split_at(n / 2);
+            (n / 2, bounds_of(l), bounds_of(r))
+        }
+    };
+    let (left, right) = prims.split_at_mut(mid);
+    let (l, r) = if n > PARALLEL_THRESHOLD {
+        rayon::join(
+            || build_binary(left, offset, depth + 1, lb),
+            || build_binary(right, offset + mid, depth + 1, rb),
+        )
+    } else {
+        (
+            build_binary(left, offset, depth + 1, lb),
+            build_binary(right, offset + mid, depth + 1, rb),
+        )
+    };
+    BNode::Inner {
+        bounds: bounds.aabb(),
+        children: Box::new([l, r]),
+    }
+}
+
+/// The bin of a (doubled) centroid on each axis, below `nb`.
+#[inline]
+fn bins_of(c2: Vec4, lo: Vec4, scale: Vec4, nb: usize) -> [usize; 3] {
+    // Round by the float trick: adding 2^23 to a value in [-0.5, 2^23)
+    // leaves the nearest integer in the low mantissa bits (SIMD adds, no
+    // saturating float-to-int conversions); subtracting 0.5 first makes it
+    // the floor except at exact integers, which is as good a bin boundary.
+    #[expect(clippy::cast_precision_loss, reason = "nb ≤ 16")]
+    let top = (nb - 1) as f32;
+    let b = ((c2 - lo) * scale - Vec4::splat(0.5))
+        .min(Vec4::splat(top))
+        .max(Vec4::ZERO)
+        + Vec4::splat(8_388_608.0);
+    let mask = 0x7F_FFFF;
+    [
+        (b.x.to_bits() & mask) as usize,
+        (b.y.to_bits() & mask) as usize,
+        (b.z.to_bits() & mask) as usize,
+    ]
+}
+
+/// In-place partition: the elements for which `pred` holds come first.
+/// Returns their count and the bounds (and centroid bounds) of both sides,
+/// gathered in the same pass. An empty side (every element on one side,
+/// which the SAH sweep never picks) is split by count instead.
+fn partition(
+    prims: &mut [PrimRef],
+    pred: impl Fn(&PrimRef) -> bool,
+) -> (usize, (Box4, Box4), (Box4, Box4)) {
+    let (mut lb, mut lc, mut rb, mut rc) = (Box4::EMPTY, Box4::EMPTY, Box4::EMPTY, Box4::EMPTY);
+    let mut i = 0;
+    for j in 0..prims.len() {
+        let p = prims[j];
+        let c = p.centroid2();
+        if pred(&p) {
+            lb.grow(p.lo, p.hi);
+            lc.grow(c, c);
+            prims.swap(i, j);
+            i += 1;
+        } else {
+            rb.grow(p.lo, p.hi);
+            rc.grow(c, c);
+        }
+    }
+    if i == 0 || i == prims.len() {
+        let mid = prims.len() / 2;
+        let (l, r) = prims.split_at(mid);
+        return (mid, bounds_of(l), bounds_of(r));
+    }
+    (i, (lb, lc), (rb, rc))
+}
+
+impl Bvh {
+    /// Builds a BVH over the triangles `ids` whose vertices `tri(id)` gives.
+    /// With `flat = true` the whole set is one leaf (the flat loop that is
+    /// faster for tiny scenes).
+    #[must_use]
+    pub fn build(ids: &[u32], tri: impl Fn(u32) -> [Vec3; 3] + Sync, flat: bool) -> Bvh {
+        let mut prims: Vec<PrimRef> = ids
+            .iter()
+            .enumerate()
+            .map(|(k, &id)| {
+                let b = Aabb::from_points(tri(id));
+                let index = f32::from_bits(u32::try_from(k).unwrap_or(u32::MAX));
+                PrimRef {
+                    lo: b.min.extend(index),
+                    hi: b.max.extend(0.0),
+                }
+            })
+            .collect();
+        let mut bvh = Bvh::default();
+        if ids.is_empty() {
+            bvh.root = EMPTY;
+            return bvh;
+        }
+        let tree = if flat {
+            let mut b = Box4::EMPTY;
+            for p in &prims {
+                b.grow(p.lo, p.hi);
+            }
+            BNode::Leaf {
+                bounds: b.aabb(),
+                start: 0,
+                count: ids.len(),
+            }
+        } else {
+            let b = bounds_of(&prims);
+            build_binary(&mut prims, 0, 0, b)
+        };
+        bvh.bounds = tree.bounds();
+        bvh.triangles = ids.len();
+        let order: Vec<u32> = prims.iter().map(|p| ids[p.index() as usize]).collect();
+        let leaves = Leaves {
+            order: &order,
+            tri: &tri,
+        };
+        match &tree {
+            BNode::Leaf { start, count, .. } => {
+                bvh.root = LEAF | bvh.emit_leaf(&leaves, *start, *count);
+                bvh.root_count = u32::try_from(*count).unwrap_or(0);
+                bvh.depth = 0;
+            }
+            BNode::Inner { .. } => {
+                bvh.root = 0;
+                bvh.nodes.push(empty_node());
+                bvh.depth = bvh.collapse(&tree, 0, &leaves);
+            }
+        }
+        bvh
+    }
+
+    /// Appends the packs of the leaf holding `order[start..start + count]`;
+    /// returns the index of its first pack.
+    fn emit_leaf<F: Fn(u32) -> [Vec3; 3]>(
+        &mut self,
+        leaves: &Leaves<'_, F>,
+        start: usize,
+        count: usize,
+    ) -> u32 {
+        let first = u32::try_from(self.packs.len()).unwrap_or(u32::MAX);
+        for chunk in leaves.order[start..start + count].chunks(4) {
+            let mut pack = TriPack::EMPTY;
+            pack.last = false;
+            for (lane, &id) in chunk.iter().enumerate() {
+                pack.set(lane, (leaves.tri)(id));
+                self.ids.push(id);
+            }
+            for _ in chunk.len()..4 {
+                self.ids.push(u32::MAX);
+            }
+            pack.lanes = u32::try_from(chunk.len()).unwrap_or(4);
+            self.packs.push(pack);
+        }
+        if let Some(p) = self.packs.last_mut() {
+            p.last = true;
+        }
+        first
+    }
+
+    /// Fills node `slot` from the binary subtree `node` (its leaves become
+    /// packs, in depth-first order); returns the depth.
+    fn collapse<F: Fn(u32) -> [Vec3; 3]>(
+        &mut self,
+        node: &BNode,
+        slot: usize,
+        leaves: &Leaves<'_, F>,
+    ) -> u32 {
+        // Gather up to four children by opening the largest inner child.
+        let mut kids: [&BNode; 4] = [node; 4];
+        let mut len = match node {
+            BNode::Inner { children, .. } => {
+                kids[0] = &children[0];
+                kids[1] = &children[1];
+                2
+            }
+            BNode::Leaf { .. } => 1,
+        };
+        while len < 4 {
+            let mut open = None;
+            let mut best_area = f32::NEG_INFINITY;
+            for (i, k) in kids[..len].iter().enumerate() {
+                if let BNode::Inner { bounds, .. } = k {
+                    let a = bounds.half_area();
+                    if a > best_area {
+                        best_area = a;
+                        open = Some(i);
+                    }
+                }
+            }
+            let Some(i) = open else { break };
+            let BNode::Inner { children, .. } = kids[i] else {
+                break;
+            };
+            kids[i] = &children[0];
+            kids[len] = &children[1];
+            len += 1;
+        }
+        let mut n = empty_node();
+        let mut depth = 0;
+        let mut pending: [(usize, usize); 4] = [(0, 0); 4];
+        let mut np = 0;
+        for (k, kid) in kids[..len].iter().enumerate() {
+            let b = kid.bounds();
+            set_lane(&mut n, k, b);
+            match kid {
+                BNode::Leaf { start, count, .. } => {
+                    n.child[k] = LEAF | self.emit_leaf(leaves, *start, *count);
+                }
+                BNode::Inner { .. } => {
+                    let idx = self.nodes.len();
+                    self.nodes.push(empty_node());
+                    n.child[k] = u32::try_from(idx).unwrap_or(EMPTY);
+                    pending[np] = (k, idx);
+                    np += 1;
+                }
+            }
+        }
+        n.used = (1 << len) - 1;
+        self.nodes[slot] = n;
+        for &(k, idx) in &pending[..np] {
+            depth = depth.max(self.collapse(kids[k], idx, leaves));
+        }
+        depth + 1
+    }
+
+    /// Statistics.
+    #[must_use]
+    pub fn stats(&self) -> BvhStats {
+        let leaves = self
+            .nodes
+            .iter()
+            .flat_map(|n| n.child.iter())
+            .filter(|&&c| c != EMPTY && c & LEAF != 0)
+            .count()
+            + usize::from(self.nodes.is_empty() && self.root != EMPTY);
+        BvhStats {
+            triangles: self.triangles,
+            nodes: self.nodes.len(),
+            leaves,
+            depth: self.depth,
+            bytes: self.nodes.len() * std::mem::size_of::<Node4>()
+                + self.packs.len() * std::mem::size_of::<TriPack>()
+                + self.ids.len() * 4,
+        }
+    }
+
+    /// The farthest `t` at which `ray` can meet a triangle of the tree:
+    /// the distance to the far side of the bounds' bounding sphere.
+    fn reach(&self, ray: &Ray64) -> f64 {
+        let (c, r) = self.bounds.bounding_sphere();
+        (ray.origin - to_f64(c)).length() + f64::from(r) * (1.0 + 1e-6)
+    }
+
+    /// The closest hit with `t` in `[ray.t_min, ray.t_max]`; equal `t`
+    /// (in `f64`, as the triangle test decides it) goes to the lower
+    /// triangle id.
+    #[must_use]
+    pub fn intersect(&self, ray: &Ray64) -> Option<BvhHit> {
+        let pre = RayPrecomp::new(ray, self.reach(ray));
+        let mut best: Option<BvhHit> = None;
+        let (t_min, mut best_t) = pre.t_range();
+        let mut t_prune = pre.ray.t_max;
+        self.traverse(&pre, &mut t_prune, true, |first, t_prune| {
+            self.leaf_hits(&pre, first, t_min, &mut best_t, |id, h, best_t| {
+                let better = match best {
+                    None => true,
+                    Some(b) => h.t64 < b.t64 || (h.t64 == b.t64 && id < b.id),
+                };
+                if better {
+                    best = Some(BvhHit {
+                        t: h.t,
+                        t64: h.t64,
+                        id,
+                        b: h.b,
+                    });
+                    *best_t = h.t64;
+                }
+                false
+            });
+            // Boxes are pruned in f32: never below the f64 distance.
+            *t_prune = f32_at_least(best_t);
+            false
+        });
+        best
+    }
+
+    /// Calls `visit(id, hit)` for every triangle hit with `t` in
+    /// `[ray.t_min, ray.t_max]`, in no particular order; stops when `visit`
+    /// returns `true`.
+    pub fn for_each_hit(&self, ray: &Ray64, mut visit: impl FnMut(u32, TriHit) -> bool) {
+        let pre = RayPrecomp::new(ray, self.reach(ray));
+        let mut t_prune = pre.ray.t_max;
+        let (t_min, mut t_max) = pre.t_range();
+        self.traverse(&pre, &mut t_prune, false, |first, _| {
+            self.leaf_hits(&pre, first, t_min, &mut t_max, |id, h, _| visit(id, h))
+        });
+    }
+
+    /// Tests the leaf starting at pack `first`: four triangles at a time
+    /// for the edge test ([`candidates`]), then the survivors one by one
+    /// in `f64`; `hit(id, hit, t_max)` may shrink `t_max` and returns
+    /// `true` to stop.
+    #[inline]
+    fn leaf_hits(
+        &self,
+        pre: &RayPrecomp,
+        first: usize,
+        t_min: f64,
+        t_max: &mut f64,
+        mut hit: impl FnMut(u32, TriHit, &mut f64) -> bool,
+    ) -> bool {
+        let mut p = first;
+        loop {
+            let pack = &self.packs[p];
+            let mut lanes = candidates(pre, pack);
+            while lanes != 0 {
+                let lane = lanes.trailing_zeros() as usize;
+                lanes &= lanes - 1;
+                if let Some(h) = intersect(pre, &pack.triangle(lane), t_min, *t_max)
+                    && hit(self.ids[4 * p + lane], h, t_max)
+                {
+                    return true;
+                }
+            }
+            if pack.last {
+                return false;
+            }
+            p += 1;
+        }
+    }
+
+    /// Walks the tree; `leaf(first_pack, t_max)` tests a leaf and may
+    /// shrink `t_max`; returning `true` stops the walk. With `ordered`,
+    /// children are visited nearest first (closest hit); without, in any
+    /// order (any hit, all hits).
+    #[inline]
+    fn traverse(
+        &self,
+        pre: &RayPrecomp,
+        t_max: &mut f32,
+        ordered: bool,
+        mut leaf: impl FnMut(usize, &mut f32) -> bool,
+    ) {
+        let ray = &pre.ray;
+        if self.root == EMPTY {
+            return;
+        }
+        if self.root & LEAF != 0 {
+            leaf((self.root & !LEAF) as usize, t_max);
+            return;
+        }
+        // A zero direction component would give 0·∞ = NaN in the slab test:
+        // replace it by a tiny one (the box test stays conservative because
+        // t_far is enlarged and the triangle test uses the true direction).
+        let safe = |d: f32| {
+            if d.abs() < 1e-30 {
+                1e-30f32.copysign(d)
+            } else {
+                d
+            }
+        };
+        let inv = Vec3::new(
+            1.0 / safe(ray.dir.x),
+            1.0 / safe(ray.dir.y),
+            1.0 / safe(ray.dir.z),
+        );
+        // Boxes inflated by the drift between the f32 ray and the f64 ray
+        // it stands for (zero when they are the same ray): the lower
+        // planes are met from the origin moved up by it, the upper planes
+        // from the origin moved down, rounded outward.
+        let e = pre.inflate;
+        let shift = |o: f32, up: bool| {
+            if e == 0.0 {
+                o
+            } else if up {
+                (o + e).next_up()
+            } else {
+                (o - e).next_down()
+            }
+        };
+        let lo_o = |o: f32| Vec4::splat(shift(o, true));
+        let hi_o = |o: f32| Vec4::splat(shift(o, false));
+        let (ox0, oy0, oz0) = (lo_o(ray.origin.x), lo_o(ray.origin.y), lo_o(ray.origin.z));
+        let (ox1, oy1, oz1) = (hi_o(ray.origin.x), hi_o(ray.origin.y), hi_o(ray.origin.z));
+        let (ix, iy, iz) = (Vec4::splat(inv.x), Vec4::splat(inv.y), Vec4::splat(inv.z));
+        let grow = 1.0 + 2.0 * gamma(3);
+        let t_min4 = Vec4::splat(ray.t_min);
+        // The stack holds (t_near bits << 32 | child). A visit pops one
+        // entry and pushes at most three (the nearest child is descended
+        // into directly), so 3·depth + 1 entries suffice; the usual trees
+        // fit the small array, which is cheap to set up per ray.
+        let need = 3 * self.depth as usize + 1;
+        let mut small = [0u64; 64];
+        let mut big = Vec::new();
+        let stack: &mut [u64] = if need <= small.len() {
+            &mut small
+        } else {
+            big.resize(need, 0);
+            &mut big
+        };
+        let mut sp = 0usize;
+        let mut node = self.root;
+        loop {
+            if node & LEAF != 0 {
+                if leaf((node & !LEAF) as usize, t_max) {
+                    return;
+                }
+            } else {
+                let n = &self.nodes[node as usize];
+                let tx0 = (n.min_x - ox0) * ix;
+                let tx1 = (n.max_x - ox1) * ix;
+                let ty0 = (n.min_y - oy0) * iy;
+                let ty1 = (n.max_y - oy1) * iy;
+                let tz0 = (n.min_z - oz0) * iz;
+                let tz1 = (n.max_z - oz1) * iz;
+                let tn = tx0.min(tx1).max(ty0.min(ty1)).max(tz0.min(tz1)).max(t_min4);
+                let tf = tx0.max(tx1).min(ty0.max(ty1)).min(tz0.max(tz1)) * grow;
+                let tf = tf.min(Vec4::splat(*t_max * grow));
+                let mut mask = tn.cmple(tf).bitmask() & n.used;
+                if mask != 0 {
+                    let tn = tn.to_array();
+                    // The nearest hit child is descended into; the others
+                    // are pushed far to near (ordered) or as they come.
+                    let mut near = mask.trailing_zeros() as usize;
+                    mask &= mask - 1;
+                    if mask == 0 {
+                        node = n.child[near];
+                        continue;
+                    }
+                    let mut rest = [0usize; 3];
+                    let mut m = 0;
+                    while mask != 0 {
+                        let k = mask.trailing_zeros() as usize;
+                        mask &= mask - 1;
+                        if ordered && tn[k] < tn[near] {
+                            rest[m] = near;
+                            near = k;
+                        } else {
+                            rest[m] = k;
+                        }
+                        m += 1;
+                    }
+                    if ordered {
+                        // Descending t_near: the nearest of the rest is popped first.
+                        for a in 1..m {
+                            let mut b = a;
+                            while b > 0 && tn[rest[b - 1]] < tn[rest[b]] {
+                                rest.swap(b - 1, b);
+                                b -= 1;
+                            }
+                        }
+                    }
+                    for &k in &rest[..m] {
+                        stack[sp] = (u64::from(tn[k].to_bits()) << 32) | u64::from(n.child[k]);
+                        sp += 1;
+                    }
+                    node = n.child[near];
+                    continue;
+                }
+            }
+            // Pop the next box that can still hold a hit. Its t_near
+            // carries rounding error too: compare it with t_max enlarged
+            // like t_far, so a box holding a hit at exactly t_max (a tie,
+            // decided by id) is still visited.
+            loop {
+                if sp == 0 {
+                    return;
+                }
+                sp -= 1;
+                let e = stack[sp];
+                #[expect(clippy::cast_possible_truncation, reason = "unpacking the two halves")]
+                let (t_near, child) = (f32::from_bits((e >> 32) as u32), e as u32);
+                if t_near <= *t_max * grow {
+                    node = child;
+                    break;
+                }
+            }
+        }
+    }
+}
+
+fn empty_node() -> Node4 {
+    let inf = Vec4::splat(f32::INFINITY);
+    Node4 {
+        min_x: inf,
+        max_x: inf,
+        min_y: inf,
+        max_y: inf,
+        min_z: inf,
+        max_z: inf,
+        child: [EMPTY; 4],
+        used: 0,
+        _pad: [0; 3],
+    }
+}
+
+fn set_lane(n: &mut Node4, k: usize, b: Aabb) {
+    n.min_x[k] = b.min.x;
+    n.max_x[k] = b.max.x;
+    n.min_y[k] = b.min.y;
+    n.max_y[k] = b.max.y;
+    n.min_z[k] = b.min.z;
+    n.max_z[k] = b.max.z;
+}

@@ -1,0 +1,428 @@
+//! Ray queries over a `TriScene`: the BVH, the watertight triangle test,
+//! the analytic shapes (spheres, boxes, superellipsoids), and the shadow
+//! rays of the [`Visibility`] interface.
+//!
+//! This layer sits below both backends: the ray tracer casts every ray
+//! through it, and the rasterizer answers shadow rays through the same
+//! [`ShadowRays`] (the hybrid of DESIGN.md §3), so both see the same shadows.
+
+#![warn(missing_docs, missing_debug_implementations)]
+
+pub mod bvh;
+pub mod triangle;
+
+use bvh::Bvh;
+pub use bvh::{BvhHit, BvhStats};
+use rendiff_core::analytic::sphere::sphere_roots;
+use rendiff_core::color::Rgb;
+use rendiff_core::math::{DVec3, Ray64, Vec3, to_f64};
+use rendiff_core::options::Geometry;
+use rendiff_core::shade::{ShadowQuery, Visibility};
+use rendiff_core::tri_scene::{Prim, TriScene};
+
+/// What an accelerator is built over.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct AccelOptions {
+    /// Triangles only, or the analytic shapes (spheres, boxes,
+    /// superellipsoids) in place of their triangles.
+    pub geometry: Geometry,
+    /// A BVH (`true`) or one flat leaf (`false`).
+    pub bvh: bool,
+}
+
+impl Default for AccelOptions {
+    fn default() -> Self {
+        AccelOptions {
+            geometry: Geometry::Mesh,
+            bvh: true,
+        }
+    }
+}
+
+/// How a primitive acts on a shadow ray.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum ShadowClass {
+    /// Blocks the light.
+    Opaque,
+    /// Multiplies it by `f·P + t`.
+    Transparent,
+    /// Casts no shadow (`no_shadow`).
+    None,
+}
+
+/// A closest hit on a triangle or an analytic shape.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    /// Ray parameter.
+    pub t: f32,
+    /// Primitive id (a triangle id, or `TriScene::analytic_id` of an
+    /// analytic shape).
+    pub prim: u32,
+    /// Barycentrics from the watertight test (zero for analytic shapes).
+    pub b: [f32; 3],
+    /// Exact-ish `t` for sphere hits (f64).
+    pub t64: f64,
+}
+
+/// The ray-query structure of a scene.
+#[derive(Debug)]
+pub struct Accel<'s> {
+    scene: &'s TriScene,
+    bvh: Bvh,
+    /// Analytic shapes in use (indices into `scene.analytic`).
+    analytic: Vec<usize>,
+    class: Vec<ShadowClass>,
+    analytic_class: Vec<ShadowClass>,
+    any_caster: bool,
+}
+
+impl<'s> Accel<'s> {
+    /// Builds the structure for a scene.
+    #[must_use]
+    pub fn new(scene: &'s TriScene, opts: AccelOptions) -> Accel<'s> {
+        let analytic: Vec<usize> = if opts.geometry == Geometry::Analytic {
+            (0..scene.analytic.len()).collect()
+        } else {
+            Vec::new()
+        };
+        let mut analytic_object = vec![false; scene.objects.len()];
+        for &k in &analytic {
+            analytic_object[scene.analytic[k].object as usize] = true;
+        }
+        let ids: Vec<u32> = (0..u32::try_from(scene.len()).unwrap_or(u32::MAX))
+            .filter(|&t| !analytic_object[scene.tri_object[t as usize] as usize])
+            .collect();
+        let bvh = Bvh::build(&ids, |id| scene.triangle(id), !opts.bvh);
+        let class_of = |object: u32, material: u16| {
+            if scene.objects[object as usize].no_shadow {
+                ShadowClass::None
+            } else if scene.materials[usize::from(material)].is_transparent() {
+                ShadowClass::Transparent
+            } else {
+                ShadowClass::Opaque
+            }
+        };
+        let class: Vec<ShadowClass> = (0..scene.len())
+            .map(|t| class_of(scene.tri_object[t], scene.tri_material[t]))
+            .collect();
+        let analytic_class: Vec<ShadowClass> = scene
+            .analytic
+            .iter()
+            .map(|s| class_of(s.object, s.material))
+            .collect();
+        let any_caster = class
+            .iter()
+            .chain(&analytic_class)
+            .any(|c| *c != ShadowClass::None);
+        Accel {
+            scene,
+            bvh,
+            analytic,
+            class,
+            analytic_class,
+            any_caster,
+        }
+    }
+
+    /// The scene.
+    #[must_use]
+    pub fn scene(&self) -> &'s TriScene {
+        self.scene
+    }
+
+    /// BVH statistics.
+    #[must_use]
+    pub fn stats(&self) -> BvhStats {
+        self.bvh.stats()
+    }
+
+    /// The closest hit in `[ray.t_min, ray.t_max]` (ties: lower id), on the
+    /// `f64` ray (see [`Ray64`]).
+    #[must_use]
+    pub fn intersect(&self, ray: &Ray64) -> Option<Hit> {
+        let mut best = self.bvh.intersect(ray).map(|h| Hit {
+            t: h.t,
+            prim: h.id,
+            b: h.b,
+            t64: h.t64,
+        });
+        if !self.analytic.is_empty() {
+            let (o, d) = (ray.origin, ray.dir);
+            for &k in &self.analytic {
+                let t_max = best.map_or(ray.t_max, |h| h.t64);
+                if let Some(t) = self.first_analytic(k, o, d, ray.t_min, t_max) {
+                    let prim = self.scene.analytic_id(k);
+                    #[expect(
+                        clippy::cast_possible_truncation,
+                        reason = "f32 copy of the f64 distance"
+                    )]
+                    let t32 = t as f32;
+                    let better = best.is_none_or(|h| t < h.t64 || (t == h.t64 && prim < h.prim));
+                    if better {
+                        best = Some(Hit {
+                            t: t32,
+                            prim,
+                            b: [0.0; 3],
+                            t64: t,
+                        });
+                    }
+                }
+            }
+        }
+        best
+    }
+
+    /// Does the world ray `o + t·d` pass through the bounds of analytic
+    /// shape `k` within `[t_min, t_max]`?
+    fn analytic_bounds_hit(&self, k: usize, o: DVec3, d: DVec3, t_min: f64, t_max: f64) -> bool {
+        let (lo, hi) = self.scene.analytic[k].bounds;
+        rendiff_core::analytic::slab_interval(o, d, lo, hi)
+            .is_some_and(|(t0, t1)| t0.max(t_min) <= t1.min(t_max))
+    }
+
+    /// The nearest crossing of the world ray with analytic shape `k` in
+    /// `[t_min, t_max]`.
+    fn first_analytic(&self, k: usize, o: DVec3, d: DVec3, t_min: f64, t_max: f64) -> Option<f64> {
+        if !self.analytic_bounds_hit(k, o, d, t_min, t_max) {
+            return None;
+        }
+        let s = &self.scene.analytic[k];
+        match s.world_sphere {
+            Some((center, radius)) => {
+                let (t0, t1) = sphere_roots(o, d, center, radius)?;
+                [t0, t1].into_iter().find(|t| *t >= t_min && *t <= t_max)
+            }
+            None => {
+                let (lo, ld) = s.placed.to_local(o, d);
+                s.placed.kind.first(lo, ld, t_min, t_max)
+            }
+        }
+    }
+
+    /// Every crossing of the world ray with analytic shape `k` in
+    /// `(t_min, t_max)`.
+    fn analytic_crossings(&self, k: usize, o: DVec3, d: DVec3, t_max: f64, out: &mut Vec<f64>) {
+        out.clear();
+        if !self.analytic_bounds_hit(k, o, d, 0.0, t_max) {
+            return;
+        }
+        let s = &self.scene.analytic[k];
+        match s.world_sphere {
+            Some((center, radius)) => {
+                if let Some((t0, t1)) = sphere_roots(o, d, center, radius) {
+                    out.extend([t0, t1].into_iter().filter(|t| *t > 0.0 && *t < t_max));
+                }
+            }
+            None => {
+                let (lo, ld) = s.placed.to_local(o, d);
+                s.placed.kind.crossings(lo, ld, 0.0, t_max, out);
+                out.retain(|t| *t < t_max);
+            }
+        }
+    }
+
+    /// Calls `visit(triangle, hit)` for every triangle hit in
+    /// `[ray.t_min, ray.t_max]` (analytic shapes excluded), in no particular
+    /// order; stops when `visit` returns `true`.
+    pub fn for_each_triangle_hit(
+        &self,
+        ray: &Ray64,
+        visit: impl FnMut(u32, triangle::TriHit) -> bool,
+    ) {
+        self.bvh.for_each_hit(ray, visit);
+    }
+
+    /// `true` when `p` lies inside the closed object `object` (parity of
+    /// the crossings of a ray in a fixed generic direction).
+    #[must_use]
+    pub fn contains(&self, object: u32, p: Vec3) -> bool {
+        if let Some(&k) = self
+            .analytic
+            .iter()
+            .find(|&&k| self.scene.analytic[k].object == object)
+        {
+            let s = &self.scene.analytic[k];
+            let local = s.placed.to_object.transform_point3(to_f64(p));
+            return s.placed.kind.contains(local);
+        }
+        let info = &self.scene.objects[object as usize];
+        if !info.closed || !info.bounds.contains(p) {
+            return false;
+        }
+        let ray = Ray64 {
+            origin: to_f64(p),
+            dir: to_f64(Vec3::new(0.577_215_7, 0.291_3, 0.751_942_6).normalize()),
+            t_min: 0.0,
+            t_max: f64::INFINITY,
+        };
+        let mut crossings = 0u32;
+        self.bvh.for_each_hit(&ray, |id, _| {
+            if info.tris.contains(&id) {
+                crossings += 1;
+            }
+            false
+        });
+        crossings % 2 == 1
+    }
+}
+
+/// Shadow rays through an [`Accel`]: the [`Visibility`] both backends use.
+///
+/// It counts the rays it casts. Each worker makes its own instance (two
+/// words), so the counter is never contended; the counts are summed.
+#[derive(Debug)]
+pub struct ShadowRays<'a, 's> {
+    accel: &'a Accel<'s>,
+    cast: std::sync::atomic::AtomicU64,
+}
+
+impl<'a, 's> ShadowRays<'a, 's> {
+    /// Shadow rays against the given structure.
+    #[must_use]
+    pub fn new(accel: &'a Accel<'s>) -> ShadowRays<'a, 's> {
+        ShadowRays {
+            accel,
+            cast: std::sync::atomic::AtomicU64::new(0),
+        }
+    }
+
+    /// Shadow rays cast through this instance (queries answered without
+    /// a ray, because nothing in the scene casts shadows, are not counted).
+    #[must_use]
+    pub fn cast(&self) -> u64 {
+        self.cast.load(std::sync::atomic::Ordering::Relaxed)
+    }
+}
+
+/// The shadow ray of a query: to a point light, the `f64` segment from the
+/// origin to the light itself, and the light's position; to a parallel
+/// light, the query's `f32` ray.
+fn shadow_ray(scene: &TriScene, q: &ShadowQuery) -> (Ray64, Option<DVec3>) {
+    let o = to_f64(q.origin);
+    if let Some(light) = scene.lights.get(q.light)
+        && let rendiff_core::shade::LightKind::Point { position } = light.kind
+    {
+        let at = to_f64(position);
+        let v = at - o;
+        let len = v.length();
+        if len > 0.0 && len.is_finite() {
+            let ray = Ray64 {
+                origin: o,
+                dir: v / len,
+                t_min: 0.0,
+                t_max: len,
+            };
+            return (ray, Some(at));
+        }
+    }
+    let ray = Ray64 {
+        origin: o,
+        dir: to_f64(q.dir),
+        t_min: 0.0,
+        t_max: f64::from(q.t_max),
+    };
+    (ray, None)
+}
+
+/// `true` when triangle `tri`'s plane passes through `light` up to the
+/// rounding of evaluating it: the shadow ray then meets the triangle at the
+/// light itself, and the triangle does not shadow it (a point light lying
+/// in a wall lights the floor, as in POV-Ray). The plane distance is
+/// `n·(L − v0)` with `n = (v1 − v0) × (v2 − v0)`, in `f64`: each
+/// component of `n` is within `γ₃(|e1_j e2_k| + |e1_k e2_j|)` and the dot
+/// product adds `γ₃` of `Σ|n_i Δ_i|`; twice the sum of those is the test.
+fn plane_through(scene: &TriScene, tri: u32, light: DVec3) -> bool {
+    let v = scene.triangle_f64(tri);
+    let (e1, e2) = (v[1] - v[0], v[2] - v[0]);
+    let n = e1.cross(e2);
+    let spread = DVec3::new(
+        (e1.y * e2.z).abs() + (e1.z * e2.y).abs(),
+        (e1.z * e2.x).abs() + (e1.x * e2.z).abs(),
+        (e1.x * e2.y).abs() + (e1.y * e2.x).abs(),
+    );
+    let delta = light - v[0];
+    let dist = n.dot(delta).abs();
+    let g = rendiff_core::math::gamma64(4);
+    dist <= 2.0 * g * (n.abs() + spread).dot(delta.abs())
+}
+
+/// `true` when a crossing of an analytic shape at `t` is the light itself:
+/// within the crossing's own error bound `p_error` (and the ray's `f64`
+/// rounding) of the segment's end.
+fn analytic_at_light(ray: &Ray64, t: f64, p_error: Vec3) -> bool {
+    ray.t_max.is_finite()
+        && (ray.t_max - t).abs()
+            <= to_f64(p_error).length() * 2.0 + rendiff_core::math::gamma64(16) * ray.t_max
+}
+
+impl Visibility for ShadowRays<'_, '_> {
+    fn transmittance(&self, q: &ShadowQuery) -> Rgb {
+        let a = self.accel;
+        if !a.any_caster {
+            return Rgb::WHITE;
+        }
+        self.cast.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let scene = a.scene;
+        let (ray, light) = shadow_ray(scene, q);
+        // Every crossing: (t, id, barycentrics); an opaque one ends it. A
+        // surface through the light itself is not an occluder.
+        let mut crossings: Vec<(f64, u32, [f32; 3])> = Vec::new();
+        let mut blocked = false;
+        a.bvh.for_each_hit(&ray, |id, h| {
+            let class = a.class[id as usize];
+            if class == ShadowClass::None || light.is_some_and(|l| plane_through(scene, id, l)) {
+                return false;
+            }
+            if class == ShadowClass::Opaque {
+                blocked = true;
+                return true;
+            }
+            crossings.push((h.t64, id, h.b));
+            false
+        });
+        if blocked {
+            return Rgb::BLACK;
+        }
+        let (o, d) = (ray.origin, ray.dir);
+        let mut ts = Vec::new();
+        for &k in &a.analytic {
+            if a.analytic_class[k] == ShadowClass::None {
+                continue;
+            }
+            a.analytic_crossings(k, o, d, ray.t_max, &mut ts);
+            for &t in &ts {
+                let p_error = scene.analytic_surface_at(k, o + d * t).p_error;
+                if analytic_at_light(&ray, t, p_error) {
+                    continue;
+                }
+                match a.analytic_class[k] {
+                    ShadowClass::Opaque => return Rgb::BLACK,
+                    ShadowClass::Transparent => {
+                        crossings.push((t, a.scene.analytic_id(k), [0.0; 3]));
+                    }
+                    ShadowClass::None => {}
+                }
+            }
+        }
+        if crossings.is_empty() {
+            return Rgb::WHITE;
+        }
+        // Multiply in order of increasing t (ties: lower id): the result
+        // does not depend on the traversal order.
+        crossings.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
+        let mut tr = Rgb::WHITE;
+        for (t, id, b) in crossings {
+            let sp = match scene.prim(id) {
+                Prim::Triangle(id) => scene.surface_at(id, rendiff_core::math::Bary(b)),
+                Prim::Analytic(k) => scene.analytic_surface_at(k, o + d * t),
+            };
+            let m = &scene.materials[usize::from(sp.material)];
+            let (p, f, t) = m.pigment_at(sp.uv);
+            tr *= p * f + Rgb::splat(t);
+            if tr.is_black() {
+                break;
+            }
+        }
+        tr
+    }
+}

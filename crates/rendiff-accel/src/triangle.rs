@@ -1,0 +1,489 @@
+//! Watertight ray/triangle intersection (Woop, Benthin & Wald, "Watertight
+//! Ray/Triangle Intersection", JCGT 2(1), 2013), decided in `f64` behind a
+//! certified `f32` filter.
+//!
+//! The ray is translated to the origin, the axes permuted so the ray runs
+//! along +z, and the triangle sheared so the ray becomes the z axis; the
+//! hit is then a 2-D inside test of three edge functions that are exact
+//! negatives of each other across a shared edge (the same products in the
+//! same order), so no ray slips between two triangles and none hits both
+//! except exactly on the shared edge.
+//!
+//! **Two stages.** [`candidates`] runs the edge functions of four
+//! triangles at once in `f32` and drops a triangle only when two of its
+//! edge functions have opposite signs *beyond their rounding error*
+//! (`EDGE_PRODUCTS`): the exact edge functions then have those signs too.
+//! Every other triangle goes to [`intersect`], which decides in `f64`
+//! (translation, shear, edge functions, distance): its error is about
+//! 2⁻⁵³ of the coordinates, against 2⁻²⁴ for an `f32` test. That matters
+//! where the vertices are far from the ray origin compared with the hit:
+//! an eye a millimetre above a floor two kilometres across sees the floor
+//! at a few millimetres, where an `f32` test misplaces the floor's edges
+//! by degrees and its distance by more than the distance itself.
+//!
+//! **No hit is rejected for being near the origin** except within the
+//! `f64` test's own error bound of `t` (pbrt-v4's δt, with `f64`
+//! rounding): about 10⁻¹⁵ of the triangle's extent in ray space. Rays
+//! that start on a surface start off it by the hit point's error bound
+//! (`shade::offset_origin`), so the surface they leave lies behind them by
+//! more than that; primary rays start at the near plane.
+//!
+//! Both stages use only the ray and the vertices, the same operations for
+//! every triangle that shares an edge, so the two triangles of an edge
+//! take the same stage for it and reach opposite signs: the test stays
+//! watertight.
+
+use glam::{DVec3, Vec4};
+
+use rendiff_core::math::{F32_EPS, Ray, Ray64, Vec3, gamma64, to_f32, to_f64};
+
+/// Rounding bounds of the `f32` edge functions of [`candidates`].
+///
+/// With u = 2⁻²⁴ and γₙ = nu/(1 − nu), per vertex: the translated
+/// coordinates `X, Y, Z` (one rounding each) and `m = |X| + |Y| + |Z|`
+/// (≥ the exact sum × (1 − γ₂)); the shear constant `S = d_x/d_z`
+/// (|S| ≤ 1, the dominant axis) carries one rounding, and differs from the
+/// `f64` ray's by ≤ 3u more (its direction rounded to `f32`), so a sheared
+/// coordinate `x = X − S·Z` lies within `e = γ₁₀·m + 2·Δo` of the `f64`
+/// ray's, where `Δo` is the distance between the two origins
+/// (`RayPrecomp::m_shift` adds `2Δo/γ₁₀` to every `m`). With
+/// `n = |x| + |y|` (computed), the edge function `c_x·b_y − c_y·b_x` is
+/// then within `γ₂(|P| + |Q|)(1 + γ₁) + e_c(n_b + e_b) + e_b(n_c + e_c)`
+/// of the `f64` ray's (`P`, `Q` the two computed products). The
+/// constants below are those coefficients rounded up by a factor of 2,
+/// which covers the rounding of the bound's own few operations and leaves
+/// the margin that keeps a certified sign clear of the `f64` test's own
+/// error (2⁻⁵³ relative): a certified edge has the same sign in `f64`.
+const EDGE_PRODUCTS: f32 = 2.0 * 2.0 * F32_EPS / (1.0 - 2.0 * F32_EPS);
+/// See [`EDGE_PRODUCTS`]: the coefficient of `m_c n_b + m_b n_c`.
+const EDGE_COORDS: f32 = 2.0 * GAMMA_10;
+/// See [`EDGE_PRODUCTS`]: the coefficient of `m_b m_c`, relative to
+/// [`EDGE_COORDS`] (`2γ₁₀²·2 / (2γ₁₀)` = 2γ₁₀).
+const EDGE_SECOND: f32 = 2.0 * GAMMA_10;
+/// γ₁₀ for `f32`.
+const GAMMA_10: f32 = 10.0 * F32_EPS / (1.0 - 10.0 * F32_EPS);
+
+/// Below this a bound is not trusted (its products may be subnormal, where
+/// relative error bounds do not hold): such edges always go to `f64`.
+const MIN_TRUSTED: f32 = 1e-30;
+
+/// Per-ray constants of the watertight test: the `f64` ray that decides,
+/// and the nearest `f32` ray that filters and walks the BVH.
+#[derive(Clone, Copy, Debug)]
+pub struct RayPrecomp {
+    /// The `f32` ray nearest to the `f64` one (`t_min` rounded down,
+    /// `t_max` up).
+    pub ray: Ray,
+    /// How far the `f32` ray strays from the `f64` one up to the
+    /// farthest `t` that matters (boxes are inflated by this).
+    pub inflate: f32,
+    /// Axis permutation: the dominant axis of the direction is `kz`.
+    pub k: [usize; 3],
+    /// The `f64` origin.
+    origin64: DVec3,
+    /// Shear constants of the `f64` direction (permuted by `k`).
+    s64: [f64; 3],
+    /// The `f64` bounds of `t`.
+    t64: (f64, f64),
+    /// The `f32` origin's coordinates, each in four lanes (for [`candidates`]).
+    o4: [Vec4; 3],
+    /// The `f32` `Sx` and `Sy` in four lanes.
+    s4: [Vec4; 2],
+    /// Added to every vertex's `m` in [`candidates`]: `2Δo/γ₁₀`.
+    m_shift: Vec4,
+}
+
+impl RayPrecomp {
+    /// Precomputes the permutation and shear of a ray; `t_bound` is the
+    /// farthest `t` at which the ray can still meet anything (it bounds the
+    /// drift between the `f64` ray and its `f32` copy).
+    #[must_use]
+    pub fn new(ray: &Ray64, t_bound: f64) -> RayPrecomp {
+        let d = to_f32(ray.dir);
+        let o = to_f32(ray.origin);
+        let ad = d.abs();
+        let kz = if ad.x > ad.y {
+            if ad.x > ad.z { 0 } else { 2 }
+        } else if ad.y > ad.z {
+            1
+        } else {
+            2
+        };
+        let mut kx = (kz + 1) % 3;
+        let mut ky = (kx + 1) % 3;
+        // Keep the winding: swap when the dominant component is negative.
+        if d[kz] < 0.0 {
+            std::mem::swap(&mut kx, &mut ky);
+        }
+        let s = Vec3::new(d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]);
+        let d64 = ray.dir;
+        // The two rays apart: origins by `do`, directions by `dd` per unit t.
+        let dorigin = (to_f64(o) - ray.origin).abs().max_element();
+        let ddir = (to_f64(d) - d64).abs().max_element();
+        let reach = if ddir == 0.0 {
+            0.0
+        } else {
+            ddir * t_bound.min(ray.t_max).max(0.0)
+        };
+        let inflate = f32_at_least((dorigin + reach) * (1.0 + 1e-6));
+        let m_shift = f32_at_least(2.0 * dorigin / f64::from(GAMMA_10));
+        RayPrecomp {
+            ray: Ray {
+                origin: o,
+                dir: d,
+                t_min: f32_at_most(ray.t_min),
+                t_max: f32_at_least(ray.t_max),
+            },
+            inflate,
+            k: [kx, ky, kz],
+            origin64: ray.origin,
+            s64: [d64[kx] / d64[kz], d64[ky] / d64[kz], 1.0 / d64[kz]],
+            t64: (ray.t_min, ray.t_max),
+            o4: [Vec4::splat(o.x), Vec4::splat(o.y), Vec4::splat(o.z)],
+            s4: [Vec4::splat(s.x), Vec4::splat(s.y)],
+            m_shift: Vec4::splat(m_shift),
+        }
+    }
+
+    /// The `f64` bounds of `t`.
+    #[must_use]
+    pub fn t_range(&self) -> (f64, f64) {
+        self.t64
+    }
+}
+
+/// Four triangles as structure of arrays: `v[corner][axis]` holds that
+/// coordinate of the four triangles, one per lane. Leaves of the BVH are
+/// runs of packs; `lanes` says how many lanes are triangles and `last`
+/// whether the leaf ends here.
+#[derive(Clone, Copy, Debug)]
+pub struct TriPack {
+    /// Corner coordinates, `v[corner][axis]`, a triangle per lane.
+    pub v: [[Vec4; 3]; 3],
+    /// Lanes in use (1 … 4).
+    pub lanes: u32,
+    /// The last pack of its leaf.
+    pub last: bool,
+}
+
+impl TriPack {
+    /// An empty pack (no lanes).
+    pub const EMPTY: TriPack = TriPack {
+        v: [[Vec4::ZERO; 3]; 3],
+        lanes: 0,
+        last: true,
+    };
+
+    /// The triangle in `lane`.
+    #[must_use]
+    #[inline]
+    pub fn triangle(&self, lane: usize) -> [Vec3; 3] {
+        self.v
+            .map(|c| Vec3::new(c[0][lane], c[1][lane], c[2][lane]))
+    }
+
+    /// Puts a triangle in `lane`.
+    pub fn set(&mut self, lane: usize, tri: [Vec3; 3]) {
+        for (corner, p) in tri.iter().enumerate() {
+            self.v[corner][0][lane] = p.x;
+            self.v[corner][1][lane] = p.y;
+            self.v[corner][2][lane] = p.z;
+        }
+    }
+}
+
+/// The lanes of `pack` that [`intersect`] could accept, as a bit mask (a
+/// superset). A lane is dropped only when one of its `f32` edge functions
+/// is below `−bound` and another above `+bound` (`EDGE_PRODUCTS`): the
+/// exact edge functions, and so the `f64` ones of [`intersect`], then have
+/// those signs as well, and the ray passes outside. Everything else —
+/// the hits, and the rays within rounding of an edge — is decided by
+/// [`intersect`].
+#[must_use]
+#[inline]
+pub fn candidates(pre: &RayPrecomp, pack: &TriPack) -> u32 {
+    let [kx, ky, kz] = pre.k;
+    let [sx, sy] = pre.s4;
+    let o = &pre.o4;
+    let shear = |c: &[Vec4; 3]| {
+        let x = c[kx] - o[kx];
+        let y = c[ky] - o[ky];
+        let z = c[kz] - o[kz];
+        let m = x.abs() + y.abs() + z.abs() + pre.m_shift;
+        let (xs, ys) = (x - sx * z, y - sy * z);
+        (xs, ys, m, xs.abs() + ys.abs())
+    };
+    let (ax, ay, am, an) = shear(&pack.v[0]);
+    let (bx, by, bm, bn) = shear(&pack.v[1]);
+    let (cx, cy, cm, cn) = shear(&pack.v[2]);
+    let g1 = Vec4::splat(EDGE_PRODUCTS);
+    let g2 = Vec4::splat(EDGE_COORDS);
+    let g3 = Vec4::splat(EDGE_SECOND);
+    let tiny = Vec4::splat(MIN_TRUSTED);
+    // The edge function of an edge from `s` to `e`, and its bound; a bound
+    // too small to trust is raised to +∞ (never certified).
+    let edge = |ex: Vec4, ey: Vec4, em: Vec4, en: Vec4, sx: Vec4, sy: Vec4, sm: Vec4, sn: Vec4| {
+        let p = ex * sy;
+        let q = ey * sx;
+        let bound = g1 * (p.abs() + q.abs()) + g2 * (em * sn + sm * en + g3 * (sm * em));
+        let bound = Vec4::select(bound.cmplt(tiny), Vec4::INFINITY, bound);
+        (p - q, bound)
+    };
+    let (u, eu) = edge(cx, cy, cm, cn, bx, by, bm, bn);
+    let (v, ev) = edge(ax, ay, am, an, cx, cy, cm, cn);
+    let (w, ew) = edge(bx, by, bm, bn, ax, ay, am, an);
+    let neg = u.cmplt(-eu) | v.cmplt(-ev) | w.cmplt(-ew);
+    let pos = u.cmpgt(eu) | v.cmpgt(ev) | w.cmpgt(ew);
+    let outside = (neg & pos).bitmask();
+    !outside & ((1u32 << pack.lanes) - 1)
+}
+
+/// A hit: distance and the barycentric weights (of v0, v1, v2) as the
+/// watertight test computes them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TriHit {
+    /// Ray parameter, rounded to `f32` from [`TriHit::t64`].
+    pub t: f32,
+    /// Ray parameter in `f64`, as decided.
+    pub t64: f64,
+    /// Barycentric weights, rounded to `f32`.
+    pub b: [f32; 3],
+}
+
+/// Intersects a ray with a triangle in `f64`, accepting
+/// `t_min ≤ t ≤ t_max` (inclusive at `t_max`, so a caller that orders
+/// equal distances by triangle id sees every tie) and `t` beyond the
+/// test's own rounding error of `t`.
+#[must_use]
+#[inline]
+#[expect(clippy::similar_names, reason = "the paper's names")]
+pub fn intersect(pre: &RayPrecomp, v: &[Vec3; 3], t_min: f64, t_max: f64) -> Option<TriHit> {
+    let [kx, ky, kz] = pre.k;
+    let [sx, sy, sz] = pre.s64;
+    let o = pre.origin64;
+    let shear = |p: Vec3| {
+        let a = to_f64(p) - o;
+        (a[kx] - sx * a[kz], a[ky] - sy * a[kz], a[kz])
+    };
+    let (ax, ay, az) = shear(v[0]);
+    let (bx, by, bz) = shear(v[1]);
+    let (cx, cy, cz) = shear(v[2]);
+    let u = cx * by - cy * bx;
+    let vv = ax * cy - ay * cx;
+    let w = bx * ay - by * ax;
+    if (u < 0.0 || vv < 0.0 || w < 0.0) && (u > 0.0 || vv > 0.0 || w > 0.0) {
+        return None;
+    }
+    let det = u + vv + w;
+    if det == 0.0 || !det.is_finite() {
+        return None;
+    }
+    let (az, bz, cz) = (sz * az, sz * bz, sz * cz);
+    let t_scaled = u * az + vv * bz + w * cz;
+    let inv = 1.0 / det;
+    let t = t_scaled * inv;
+    if !(t >= t_min && t <= t_max) {
+        return None;
+    }
+    // pbrt-v4's bound on the rounding error of t, with f64's γ: hits
+    // within it of 0 cannot be told from the surface the ray leaves.
+    let max_zt = az.abs().max(bz.abs()).max(cz.abs());
+    let max_xt = ax.abs().max(bx.abs()).max(cx.abs());
+    let max_yt = ay.abs().max(by.abs()).max(cy.abs());
+    let delta_z = gamma64(3) * max_zt;
+    let delta_x = gamma64(5) * (max_xt + max_zt);
+    let delta_y = gamma64(5) * (max_yt + max_zt);
+    let delta_e = 2.0 * (gamma64(2) * max_xt * max_yt + delta_y * max_xt + delta_x * max_yt);
+    let max_e = u.abs().max(vv.abs()).max(w.abs());
+    let delta_t =
+        3.0 * (gamma64(3) * max_e * max_zt + delta_e * max_zt + delta_z * max_e) * inv.abs();
+    if t <= delta_t {
+        return None;
+    }
+    #[expect(
+        clippy::cast_possible_truncation,
+        reason = "the f32 copies of the f64 result"
+    )]
+    Some(TriHit {
+        t: t as f32,
+        t64: t,
+        b: [(u * inv) as f32, (vv * inv) as f32, (w * inv) as f32],
+    })
+}
+
+/// The smallest `f32` not below `t` (a traversal bound that never cuts off
+/// a hit at `t`).
+#[must_use]
+#[inline]
+pub(crate) fn f32_at_least(t: f64) -> f32 {
+    #[expect(
+        clippy::cast_possible_truncation,
+        reason = "rounded, then corrected upward"
+    )]
+    let r = t as f32;
+    if f64::from(r) < t { r.next_up() } else { r }
+}
+
+/// The largest `f32` not above `t`.
+#[must_use]
+#[inline]
+pub(crate) fn f32_at_most(t: f64) -> f32 {
+    #[expect(
+        clippy::cast_possible_truncation,
+        reason = "rounded, then corrected downward"
+    )]
+    let r = t as f32;
+    if f64::from(r) > t { r.next_down() } else { r }
+}
+
+pub use rendiff_core::math::plane_barycentrics;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ray(o: Vec3, d: Vec3) -> Ray {
+        Ray {
+            origin: o,
+            dir: d.normalize(),
+            t_min: 0.0,
+            t_max: f32::INFINITY,
+        }
+    }
+
+    #[test]
+    fn hits_inside_misses_outside() {
+        let tri = [Vec3::ZERO, Vec3::X, Vec3::Y];
+        let r = ray(Vec3::new(0.25, 0.25, 1.0), -Vec3::Z);
+        let h = intersect(
+            &RayPrecomp::new(&Ray64::from(&r), f64::INFINITY),
+            &tri,
+            0.0,
+            f64::INFINITY,
+        )
+        .unwrap();
+        assert!((h.t - 1.0).abs() < 1e-6);
+        assert!((h.b[1] - 0.25).abs() < 1e-6 && (h.b[2] - 0.25).abs() < 1e-6);
+        let r = ray(Vec3::new(0.75, 0.75, 1.0), -Vec3::Z);
+        assert!(
+            intersect(
+                &RayPrecomp::new(&Ray64::from(&r), f64::INFINITY),
+                &tri,
+                0.0,
+                f64::INFINITY
+            )
+            .is_none()
+        );
+        // Behind the origin: no hit.
+        let r = ray(Vec3::new(0.25, 0.25, 1.0), Vec3::Z);
+        assert!(
+            intersect(
+                &RayPrecomp::new(&Ray64::from(&r), f64::INFINITY),
+                &tri,
+                0.0,
+                f64::INFINITY
+            )
+            .is_none()
+        );
+    }
+
+    #[test]
+    fn shared_edge_is_never_missed() {
+        // Two triangles sharing the diagonal of a square; rays through
+        // points on the diagonal must hit at least one of them.
+        let t1 = [
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(1.0, 0.0, 0.0),
+            Vec3::new(1.0, 1.0, 0.0),
+        ];
+        let t2 = [
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(1.0, 1.0, 0.0),
+            Vec3::new(0.0, 1.0, 0.0),
+        ];
+        for k in 0..1000 {
+            let s = (k as f32 + 0.5) / 1000.0;
+            let r = ray(Vec3::new(s, s, 3.0), Vec3::new(0.013, -0.007, -1.0));
+            // Aim so the ray crosses the plane exactly on the diagonal.
+            let target = Vec3::new(s, s, 0.0);
+            let r = ray(r.origin, target - r.origin);
+            let pre = RayPrecomp::new(&Ray64::from(&r), f64::INFINITY);
+            let hit = intersect(&pre, &t1, 0.0, f64::INFINITY).is_some()
+                || intersect(&pre, &t2, 0.0, f64::INFINITY).is_some();
+            assert!(hit, "ray {k} slipped through the shared edge");
+        }
+    }
+
+    /// The filter never drops a triangle the `f64` test accepts: rays
+    /// through points near edges and vertices of triangles at every scale
+    /// and distance, with `f64` directions whose `f32` rounding differs.
+    #[test]
+    fn the_filter_keeps_every_hit() {
+        let mut state = 0x1234_5678_9abc_def0_u64;
+        let mut next = move || {
+            state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+            let mut z = state;
+            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+            #[expect(clippy::cast_precision_loss, reason = "53 random bits")]
+            let f = ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64;
+            f
+        };
+        let mut kept = 0u32;
+        for case in 0..200_000u32 {
+            let scale = 10f64.powf(next() * 9.0 - 3.0);
+            let offset = 10f64.powf(next() * 6.0) * (next() - 0.5);
+            let c = DVec3::new(offset, offset * 0.3, -offset * 0.7);
+            let p =
+                |r: f64, s: f64, t: f64| to_f32(c + DVec3::new(r - 0.5, s - 0.5, t - 0.5) * scale);
+            let tri = [
+                p(next(), next(), next()),
+                p(next(), next(), next()),
+                p(next(), next(), next()),
+            ];
+            // A target on an edge or at a vertex, nudged by a few ulps.
+            let v = tri.map(to_f64);
+            let (i, j) = ((case % 3) as usize, ((case + 1) % 3) as usize);
+            let s = next();
+            let target = v[i]
+                + (v[j] - v[i]) * if case % 7 == 0 { 0.0 } else { s }
+                + DVec3::new(next() - 0.5, next() - 0.5, next() - 0.5) * scale * 1e-7;
+            let dist = 10f64.powf(next() * 8.0 - 4.0) * scale;
+            let dir = DVec3::new(next() - 0.5, next() - 0.5, next() - 0.5).normalize();
+            let origin = target - dir * dist;
+            let ray = Ray64 {
+                origin: if case % 2 == 0 {
+                    rendiff_core::math::to_f64(to_f32(origin))
+                } else {
+                    origin
+                },
+                dir,
+                t_min: 0.0,
+                t_max: f64::INFINITY,
+            };
+            let pre = RayPrecomp::new(&ray, dist * 4.0 + scale * 4.0);
+            let mut pack = TriPack::EMPTY;
+            pack.lanes = 1;
+            pack.set(0, tri);
+            let accepted = intersect(&pre, &tri, 0.0, f64::INFINITY).is_some();
+            let lanes = candidates(&pre, &pack);
+            assert!(
+                !accepted || lanes & 1 == 1,
+                "case {case}: the filter dropped a hit: {tri:?} {ray:?}"
+            );
+            kept += lanes & 1;
+        }
+        assert!(kept > 0);
+    }
+
+    #[test]
+    fn plane_barycentrics_match() {
+        use glam::DVec3;
+        let v = [DVec3::ZERO, DVec3::X, DVec3::Y];
+        let (b, t) = plane_barycentrics(DVec3::new(0.2, 0.3, 2.0), -DVec3::Z, v).unwrap();
+        assert!(
+            (b[0] - 0.5).abs() < 1e-15 && (b[1] - 0.2).abs() < 1e-15 && (b[2] - 0.3).abs() < 1e-15
+        );
+        assert!((t - 2.0).abs() < 1e-15);
+    }
+}

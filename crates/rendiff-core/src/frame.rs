@@ -1,0 +1,162 @@
+//! `Frame`: what every backend produces — the pixel colours and, per
+//! sample, the G-buffer the verdict reads (colour, depth, triangle id,
+//! shading flags).
+
+use std::path::Path;
+
+use crate::color::Rgb;
+use crate::image_io::{self, ImageIoError, PngEncoding};
+
+/// Triangle id of a sample that sees the background.
+pub const BACKGROUND: u32 = u32::MAX;
+
+/// A rendered frame.
+///
+/// # Guarantees
+///
+/// `color.len() == width·height`; the sample buffers have
+/// `(width·samples)·(height·samples)` entries, row-major from the top of
+/// the sample grid (with one sample per pixel the sample colours are the
+/// pixel colours: `sample_color` is empty and [`Frame::sample_colors`]
+/// returns `color`, which saves a frame-sized buffer and its copy); every
+/// colour is finite.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Frame {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Samples per pixel side.
+    pub samples: u32,
+    /// Pixel colours (the plain mean of their samples), linear.
+    pub color: Vec<Rgb>,
+    /// Sample colours, linear (empty with one sample per pixel: read them
+    /// with [`Frame::sample_colors`]).
+    pub sample_color: Vec<Rgb>,
+    /// Depth per sample: t along the unit primary ray; +∞ for background.
+    pub depth: Vec<f32>,
+    /// Visible primitive per sample ([`BACKGROUND`] for none).
+    pub id: Vec<u32>,
+    /// Shading flags per sample (bit 0: discontinuity; bits 1–31: shadows of lights 0–30).
+    pub flags: Vec<u32>,
+}
+
+impl Frame {
+    /// An empty (background) frame.
+    #[must_use]
+    pub fn new(width: u32, height: u32, samples: u32, background: Rgb) -> Frame {
+        let n = (width as usize) * (height as usize);
+        let ns = n * (samples as usize) * (samples as usize);
+        Frame {
+            width,
+            height,
+            samples,
+            color: vec![background; n],
+            sample_color: if samples == 1 {
+                Vec::new()
+            } else {
+                vec![background; ns]
+            },
+            depth: vec![f32::INFINITY; ns],
+            id: vec![BACKGROUND; ns],
+            flags: vec![0; ns],
+        }
+    }
+
+    /// Width of the sample grid.
+    #[must_use]
+    pub fn sample_width(&self) -> u32 {
+        self.width * self.samples
+    }
+
+    /// Height of the sample grid.
+    #[must_use]
+    pub fn sample_height(&self) -> u32 {
+        self.height * self.samples
+    }
+
+    /// Number of samples.
+    #[must_use]
+    pub fn sample_count(&self) -> usize {
+        self.id.len()
+    }
+
+    /// The sample colours (the pixel colours with one sample per pixel).
+    #[must_use]
+    pub fn sample_colors(&self) -> &[Rgb] {
+        if self.samples == 1 {
+            &self.color
+        } else {
+            &self.sample_color
+        }
+    }
+
+    /// The sample colours and the other per-sample buffers at once, for a
+    /// renderer filling them in parallel: (colour, depth, id, flags).
+    pub fn sample_buffers_mut(&mut self) -> (&mut [Rgb], &mut [f32], &mut [u32], &mut [u32]) {
+        let color = if self.samples == 1 {
+            &mut self.color
+        } else {
+            &mut self.sample_color
+        };
+        (color, &mut self.depth, &mut self.id, &mut self.flags)
+    }
+
+    /// Recomputes the pixel colours as the mean of their samples, each
+    /// clamped to [0, 1] first (as POV-Ray's anti-aliasing does: a bright
+    /// highlight sample counts as full scale, not more); nothing to do with
+    /// one sample per pixel.
+    pub fn resolve(&mut self) {
+        if self.samples == 1 {
+            return;
+        }
+        let n = self.samples as usize;
+        let sw = self.sample_width() as usize;
+        #[expect(clippy::cast_precision_loss, reason = "n² ≤ 256")]
+        let inv = 1.0 / (n * n) as f32;
+        for y in 0..self.height as usize {
+            for x in 0..self.width as usize {
+                let mut acc = Rgb::BLACK;
+                for b in 0..n {
+                    let row = (y * n + b) * sw + x * n;
+                    for a in 0..n {
+                        acc += self.sample_color[row + a].clamp01();
+                    }
+                }
+                self.color[y * self.width as usize + x] = if n == 1 { acc } else { acc * inv };
+            }
+        }
+    }
+
+    /// Writes the colour image (8-bit sRGB or 16-bit linear).
+    ///
+    /// # Errors
+    ///
+    /// [`ImageIoError`].
+    pub fn write_png(&self, path: &Path, encoding: PngEncoding) -> Result<(), ImageIoError> {
+        image_io::write_png(path, self.width, self.height, &self.color, encoding)
+    }
+
+    /// Writes the G-buffer of DESIGN.md §5 into `dir`: `depth.pfm`,
+    /// `id.png` (id + 1 as RGBA8 little-endian, 0 = background) and
+    /// `flags.png`, at the sample resolution.
+    ///
+    /// # Errors
+    ///
+    /// [`ImageIoError`].
+    pub fn write_gbuffer(&self, dir: &Path) -> Result<(), ImageIoError> {
+        std::fs::create_dir_all(dir).map_err(|source| ImageIoError::Io {
+            path: dir.to_path_buf(),
+            source,
+        })?;
+        let (w, h) = (self.sample_width(), self.sample_height());
+        let [depth, id, flags] = GBUFFER_FILES;
+        image_io::write_pfm(&dir.join(depth), w, h, &self.depth)?;
+        let ids: Vec<u32> = self.id.iter().map(|&i| i.wrapping_add(1)).collect();
+        image_io::write_png_u32(&dir.join(id), w, h, &ids)?;
+        image_io::write_png_u32(&dir.join(flags), w, h, &self.flags)
+    }
+}
+
+/// The files [`Frame::write_gbuffer`] writes into its folder.
+pub const GBUFFER_FILES: [&str; 3] = ["depth.pfm", "id.png", "flags.png"];

@@ -1,0 +1,261 @@
+//! Render settings shared by the scene file, the command line and the
+//! backends: the named conventions of DESIGN.md §4–§5 as enums, never as
+//! booleans.
+
+use std::fmt;
+use std::str::FromStr;
+
+/// A value of an option that does not parse (`--depth u12`,
+/// `shadows = "map:x"`): the text given and what was expected.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("{message}")]
+pub struct ParseOptionError {
+    /// The text given.
+    pub got: String,
+    /// What was wrong with it, and what was expected.
+    pub message: String,
+}
+
+impl ParseOptionError {
+    /// The error for the text `got`, with `message`.
+    #[must_use]
+    pub fn new(got: &str, message: String) -> ParseOptionError {
+        ParseOptionError {
+            got: got.to_string(),
+            message,
+        }
+    }
+}
+
+/// A [`ParseOptionError`] for the text `s`, with a formatted message.
+macro_rules! parse_error {
+    ($s:expr, $($t:tt)*) => {
+        ParseOptionError::new($s, format!($($t)*))
+    };
+}
+
+/// Format of the rasterizer's depth buffer (DESIGN.md §2).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum DepthFormat {
+    /// `f32` reversed-Z (perspective stores near/z).
+    #[default]
+    F32,
+    /// 24-bit unsigned normalised.
+    U24,
+    /// 16-bit unsigned normalised.
+    U16,
+}
+
+impl DepthFormat {
+    /// Bits of an integer format (`None` for f32).
+    #[must_use]
+    pub fn bits(self) -> Option<u32> {
+        match self {
+            DepthFormat::F32 => None,
+            DepthFormat::U24 => Some(24),
+            DepthFormat::U16 => Some(16),
+        }
+    }
+}
+
+impl fmt::Display for DepthFormat {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            DepthFormat::F32 => "f32",
+            DepthFormat::U24 => "u24",
+            DepthFormat::U16 => "u16",
+        })
+    }
+}
+
+impl FromStr for DepthFormat {
+    type Err = ParseOptionError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "f32" => Ok(DepthFormat::F32),
+            "u24" => Ok(DepthFormat::U24),
+            "u16" => Ok(DepthFormat::U16),
+            _ => Err(parse_error!(
+                s,
+                "expected \"f32\", \"u24\" or \"u16\", got \"{s}\""
+            )),
+        }
+    }
+}
+
+/// How the rasterizer answers shadow rays.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum ShadowMode {
+    /// The same shadow rays as the ray tracer (hybrid).
+    #[default]
+    Rays,
+    /// A shadow map of the given resolution per light.
+    Map(u32),
+}
+
+impl ShadowMode {
+    /// Smallest shadow-map resolution.
+    pub const MIN_RES: u32 = 64;
+    /// Largest shadow-map resolution.
+    pub const MAX_RES: u32 = 16_384;
+}
+
+impl fmt::Display for ShadowMode {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            ShadowMode::Rays => f.write_str("rays"),
+            ShadowMode::Map(r) => write!(f, "map:{r}"),
+        }
+    }
+}
+
+impl FromStr for ShadowMode {
+    type Err = ParseOptionError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        if s == "rays" {
+            return Ok(ShadowMode::Rays);
+        }
+        if let Some(r) = s.strip_prefix("map:") {
+            let res: u32 = r.parse().map_err(|_| {
+                parse_error!(s, "expected \"map:RES\" with an integer RES, got \"{s}\"")
+            })?;
+            if !(Self::MIN_RES..=Self::MAX_RES).contains(&res) {
+                return Err(parse_error!(
+                    s,
+                    "shadow map resolution {res} is outside {} … {}",
+                    Self::MIN_RES,
+                    Self::MAX_RES
+                ));
+            }
+            return Ok(ShadowMode::Map(res));
+        }
+        Err(parse_error!(
+            s,
+            "expected \"rays\" or \"map:RES\", got \"{s}\""
+        ))
+    }
+}
+
+/// Whether the ray tracer uses a BVH.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum BvhMode {
+    /// Decided by the render plan (a flat loop for tiny scenes).
+    #[default]
+    Auto,
+    /// Always a BVH.
+    On,
+    /// Always a flat loop.
+    Off,
+}
+
+impl fmt::Display for BvhMode {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            BvhMode::Auto => "auto",
+            BvhMode::On => "on",
+            BvhMode::Off => "off",
+        })
+    }
+}
+
+impl FromStr for BvhMode {
+    type Err = ParseOptionError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "auto" => Ok(BvhMode::Auto),
+            "on" => Ok(BvhMode::On),
+            "off" => Ok(BvhMode::Off),
+            _ => Err(parse_error!(
+                s,
+                "expected \"auto\", \"on\" or \"off\", got \"{s}\""
+            )),
+        }
+    }
+}
+
+/// What geometry the ray tracer intersects.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum Geometry {
+    /// The triangles every backend sees.
+    #[default]
+    Mesh,
+    /// Analytic shapes where the ray tracer has them (spheres).
+    Analytic,
+}
+
+impl fmt::Display for Geometry {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Geometry::Mesh => "mesh",
+            Geometry::Analytic => "analytic",
+        })
+    }
+}
+
+impl FromStr for Geometry {
+    type Err = ParseOptionError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "mesh" => Ok(Geometry::Mesh),
+            "analytic" => Ok(Geometry::Analytic),
+            _ => Err(parse_error!(
+                s,
+                "expected \"mesh\" or \"analytic\", got \"{s}\""
+            )),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn settings_round_trip_through_text() {
+        for s in ["f32", "u24", "u16"] {
+            assert_eq!(s.parse::<DepthFormat>().unwrap().to_string(), s);
+        }
+        for s in ["rays", "map:64", "map:2048"] {
+            assert_eq!(s.parse::<ShadowMode>().unwrap().to_string(), s);
+        }
+        assert!("map:63".parse::<ShadowMode>().is_err());
+        assert!("map:x".parse::<ShadowMode>().is_err());
+        assert!("f16".parse::<DepthFormat>().is_err());
+    }
+}
+
+/// How the painter orders its triangles (`--sort`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum PainterSort {
+    /// By the view depth of the centroid, farthest first: the plain
+    /// list-priority sort, which misorders long triangles.
+    Centroid,
+    /// Newell, Newell and Sancha's tests on every pair whose projections
+    /// overlap (depth ranges, then each triangle's plane against the
+    /// other's vertices), then a topological sort, farthest first.
+    #[default]
+    Newell,
+}
+
+impl fmt::Display for PainterSort {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.pad(match self {
+            PainterSort::Centroid => "centroid",
+            PainterSort::Newell => "newell",
+        })
+    }
+}
+
+impl FromStr for PainterSort {
+    type Err = ParseOptionError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "centroid" => Ok(PainterSort::Centroid),
+            "newell" => Ok(PainterSort::Newell),
+            _ => Err(parse_error!(
+                s,
+                "expected \"centroid\" or \"newell\", got \"{s}\""
+            )),
+        }
+    }
+}

@@ -1,0 +1,898 @@
+//! Backend A: the scanline z-buffer rasterizer.
+//!
+//! 1. **Transform**: every vertex to homogeneous screen space `(X·w, Y·w, w)`
+//!    in `f64`, with the ray tracer's camera.
+//! 2. **Setup** (parallel over triangles, in id order): frustum and
+//!    back-face culling where the plan allows it, homogeneous clipping
+//!    against the near plane (and a guard band where needed), snapping to
+//!    1/256 pixel ([`rendiff_core::coverage`]); every sub-triangle that covers a
+//!    sample row becomes a compact record, binned to fixed bands of sample
+//!    rows.
+//! 3. **Visibility** (parallel over bands): per record, the coverage rule's
+//!    exact integer DDA gives the covered span of every sample row; along
+//!    the span the perspective-correct plane values `λ_i = b_i/w` of the
+//!    *unsnapped* triangle and the depth plane are stepped incrementally
+//!    in `f64`, re-anchored by direct evaluation at every span start. The
+//!    depth test compares (depth key, triangle id), so equal depths go to
+//!    the lower id whatever the drawing order.
+//! 4. **Deferred shading** (parallel over rows): each visible sample is
+//!    shaded once through `TriScene::surface_at` and `shade::shade` with
+//!    the sample's primary-ray direction; shadows by the same shadow rays
+//!    as the ray tracer, or a shadow map.
+//!
+//! Bands have a fixed height (independent of the thread count) and each
+//! sample is written by one band only, so the output is bit-identical for
+//! any number of threads.
+
+#![warn(missing_docs, missing_debug_implementations)]
+
+pub mod clip;
+pub mod painter;
+pub mod shadow_map;
+
+use rayon::prelude::*;
+
+use clip::{HVert, clip_polygon, planes};
+use rendiff_accel::{Accel, AccelOptions, ShadowRays};
+use rendiff_core::camera::Projection;
+use rendiff_core::color::Rgb;
+use rendiff_core::coverage::{FillRule, SampleGrid, SnappedTri, Sub8, bbox_samples, doubled_area};
+use rendiff_core::frame::{BACKGROUND, Frame};
+use rendiff_core::math::{DVec3, to_f64};
+use rendiff_core::options::{DepthFormat, ShadowMode};
+use rendiff_core::shade::{self, Unoccluded, Visibility};
+use rendiff_core::tri_scene::TriScene;
+
+pub use rendiff_core::coverage::DEPTH_DRIFT_REL;
+
+/// Sample rows per band.
+const BAND: u32 = 32;
+/// Guard band around the screen (pixels); beyond it triangles are clipped.
+/// With sides ≤ 16384 px every snapped coordinate stays below 2¹⁷ px,
+/// far inside [`rendiff_core::coverage::MAX_SNAPPED`].
+const GUARD_PX: f64 = 65_536.0;
+
+/// The test hooks (feature `testing`): perturbations for the verdict's
+/// negative controls, the coverage visitor and the drift measure. Without
+/// the feature the rasterizer always runs unperturbed and none of them is
+/// part of the API.
+mod hooks {
+    use rendiff_core::coverage::FillRule;
+
+    /// Test-only perturbations for the verdict's negative controls.
+    #[derive(Clone, Copy, Debug, Default, PartialEq)]
+    pub struct Perturb {
+        /// Shift every projected vertex by this many pixels in x and y.
+        pub offset_px: f64,
+        /// The fill rule (bottom-right flips the ownership of edge samples).
+        pub fill_rule: FillRule,
+    }
+}
+#[cfg(feature = "testing")]
+pub use hooks::Perturb;
+#[cfg(not(feature = "testing"))]
+use hooks::Perturb;
+
+/// Options of the rasterizer.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RasterOptions {
+    /// Depth buffer format.
+    pub depth: DepthFormat,
+    /// Shadows by rays or a shadow map.
+    pub shadows: ShadowMode,
+    /// The plan allows shadows at all.
+    pub shadows_needed: bool,
+    /// ε_g for the shading flags.
+    pub gate_eps: f32,
+    /// Per object: skip for primary visibility (outside the frustum).
+    pub frustum_cull: Vec<bool>,
+    /// Per object: cull back faces.
+    pub backface_cull: Vec<bool>,
+    /// Test-only perturbation (feature `testing`).
+    #[cfg(feature = "testing")]
+    pub perturb: Perturb,
+}
+
+impl RasterOptions {
+    /// The perturbation to apply: none without the `testing` feature.
+    pub(crate) fn perturbation(&self) -> Perturb {
+        #[cfg(feature = "testing")]
+        {
+            self.perturb
+        }
+        #[cfg(not(feature = "testing"))]
+        {
+            Perturb::default()
+        }
+    }
+}
+
+/// Counters of one render.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RasterStats {
+    /// Triangles considered.
+    pub triangles: usize,
+    /// Sub-triangles that reached scan conversion.
+    pub records: usize,
+    /// Samples that passed the depth test (including overwritten ones).
+    pub depth_writes: u64,
+    /// Samples tested.
+    pub fragments: u64,
+    /// Triangles culled from primary visibility by the plan.
+    pub culled: Culled,
+    /// A BVH was built for shadow rays.
+    pub shadow_bvh: bool,
+    /// Shadow rays cast by the shading pass.
+    pub shadow_rays: u64,
+    /// Shadow maps built (one per parallel light, six per point light).
+    pub shadow_maps: usize,
+}
+
+/// A record of a (sub-)triangle to scan: snapped vertices, its triangle
+/// id and its sample-row range.
+#[derive(Clone, Copy, Debug)]
+struct Record {
+    x: [i32; 3],
+    y: [i32; 3],
+    tri: u32,
+    rows: (u32, u32),
+    /// A back face (doubled signed area ≥ 0 before orientation).
+    #[cfg_attr(
+        not(feature = "testing"),
+        expect(dead_code, reason = "read only by the testing hook `cover`")
+    )]
+    back: bool,
+    /// The fill rule in effect.
+    rule: FillRule,
+}
+
+impl Record {
+    fn snapped(&self) -> Option<SnappedTri> {
+        SnappedTri::from_snapped(
+            [
+                (i64::from(self.x[0]), i64::from(self.y[0])),
+                (i64::from(self.x[1]), i64::from(self.y[1])),
+                (i64::from(self.x[2]), i64::from(self.y[2])),
+            ],
+            self.rule,
+        )
+    }
+}
+
+/// A placeholder for the band lists before they are filled.
+static EMPTY_RECORD: Record = Record {
+    x: [0; 3],
+    y: [0; 3],
+    tri: 0,
+    rows: (0, 0),
+    back: false,
+    rule: FillRule::TopLeft,
+};
+
+/// Interpolation planes of a triangle: `λ_i = b_i/w` and the depth plane,
+/// each `m0·X + m1·Y + m2` relative to an anchor `(ax, ay)` (pixels).
+#[derive(Clone, Copy, Debug)]
+struct Planes {
+    lambda: [[f64; 3]; 3],
+    depth: [f64; 3],
+    ax: f64,
+    ay: f64,
+}
+
+impl Planes {
+    fn eval(p: &[f64; 3], dx: f64, dy: f64) -> f64 {
+        p[0] * dx + p[1] * dy + p[2]
+    }
+}
+
+/// The visibility buffers of the sample grid.
+#[derive(Clone, Debug)]
+pub struct VisibilityBuffers {
+    /// Depth key per sample (smaller is nearer; `u32::MAX` empty).
+    pub key: Vec<u32>,
+    /// Triangle id per sample ([`BACKGROUND`] empty).
+    pub id: Vec<u32>,
+    /// Counters.
+    pub stats: RasterStats,
+}
+
+/// Maps the stepped depth value to the format's key (smaller = nearer).
+#[derive(Clone, Copy, Debug)]
+struct DepthMap {
+    format: DepthFormat,
+    perspective: bool,
+    near: f64,
+    far: f64,
+}
+
+impl DepthMap {
+    /// `v` is 1/z (perspective) or z (orthographic).
+    #[inline]
+    #[expect(
+        clippy::cast_possible_truncation,
+        clippy::cast_sign_loss,
+        reason = "quantisation to the depth format, clamped to its range first"
+    )]
+    fn key(&self, v: f64) -> u32 {
+        match self.format {
+            DepthFormat::F32 => {
+                // Reversed-Z: near/z (perspective), 1 − (z − near)/(far − near).
+                let r = if self.perspective {
+                    self.near * v
+                } else {
+                    1.0 - (v - self.near) / (self.far - self.near)
+                };
+                let f = r as f32;
+                // Larger reversed value is nearer: order-preserving bits, inverted.
+                let bits = f.to_bits();
+                let ordered = if bits >> 31 == 1 {
+                    !bits
+                } else {
+                    bits | 0x8000_0000
+                };
+                u32::MAX - 1 - ordered.min(u32::MAX - 1)
+            }
+            DepthFormat::U24 | DepthFormat::U16 => {
+                let bits = self.format.bits().unwrap_or(24);
+                let max = f64::from((1u32 << bits) - 1);
+                let q = if self.perspective {
+                    (1.0 / self.near - v) / (1.0 / self.near - 1.0 / self.far)
+                } else {
+                    (v - self.near) / (self.far - self.near)
+                };
+                let k = (q.max(0.0) * max).round().min(max - 1.0);
+                k as u32
+            }
+        }
+    }
+}
+
+/// Renders a scene.
+#[must_use]
+pub fn render(scene: &TriScene, opts: &RasterOptions) -> (Frame, RasterStats) {
+    let vis = visibility(scene, opts);
+    let mut stats = vis.stats;
+    let (frame, shadow_rays, shadow_maps) = shade_pass(scene, opts, &vis);
+    stats.shadow_bvh = opts.shadows_needed && opts.shadows == ShadowMode::Rays;
+    stats.shadow_rays = shadow_rays;
+    stats.shadow_maps = shadow_maps;
+    (frame, stats)
+}
+
+fn homogeneous(scene: &TriScene, perturb: Perturb) -> Vec<HVert> {
+    let cam = &scene.camera;
+    let (w, h) = (f64::from(cam.width()), f64::from(cam.height()));
+    let (e, f, r, u) = (cam.eye(), cam.forward(), cam.right(), cam.up());
+    let a = cam.aspect();
+    let off = perturb.offset_px;
+    scene
+        .positions
+        .par_iter()
+        .map(|p| {
+            let rel = to_f64(*p) - e;
+            let (xc, yc, zc) = (rel.dot(r), rel.dot(u), rel.dot(f));
+            match cam.projection() {
+                Projection::Perspective { tan_half_fov: t } => HVert {
+                    xh: (xc / (t * a) + zc) * w / 2.0 + off * zc,
+                    yh: (zc - yc / t) * h / 2.0 + off * zc,
+                    w: zc,
+                    z: zc,
+                },
+                Projection::Orthographic { view_height: vh } => HVert {
+                    xh: (xc / (vh * a / 2.0) + 1.0) * w / 2.0 + off,
+                    yh: (1.0 - yc / (vh / 2.0)) * h / 2.0 + off,
+                    w: 1.0,
+                    z: zc,
+                },
+            }
+        })
+        .collect()
+}
+
+/// The visibility pass alone: depth keys, ids and barycentrics per sample.
+#[must_use]
+pub fn visibility(scene: &TriScene, opts: &RasterOptions) -> VisibilityBuffers {
+    visibility_with(scene, opts, &Rule::ZBuffer)
+}
+
+/// How a sample chooses between the triangles that cover it.
+#[derive(Clone, Debug)]
+pub(crate) enum Rule<'a> {
+    /// The nearest (depth key, then triangle id): the z-buffer.
+    ZBuffer,
+    /// The last drawn: triangles are drawn in order of their rank
+    /// (`rank[tri]`, ascending), each overwriting what is there (list
+    /// priority, the painter's algorithm).
+    Painter(&'a [u32]),
+}
+
+/// The visibility pass under a rule.
+pub(crate) fn visibility_with(
+    scene: &TriScene,
+    opts: &RasterOptions,
+    rule: &Rule<'_>,
+) -> VisibilityBuffers {
+    let cam = &scene.camera;
+    let n = cam.samples();
+    let grid = SampleGrid::new(n);
+    let (sw, sh) = (cam.sample_width(), cam.sample_height());
+    let hv = homogeneous(scene, opts.perturbation());
+    let perspective = matches!(cam.projection(), Projection::Perspective { .. });
+
+    // Setup: per chunk of triangles, in id order.
+    let chunk = 4096usize;
+    let n_tris = scene.len();
+    let chunks: Vec<(Vec<Record>, Culled)> = (0..n_tris.div_ceil(chunk))
+        .into_par_iter()
+        .map(|c| {
+            records(
+                scene,
+                &hv,
+                c * chunk..((c + 1) * chunk).min(n_tris),
+                &grid,
+                opts.perturbation().fill_rule,
+                |obj| {
+                    (
+                        opts.frustum_cull.get(obj).copied().unwrap_or(false),
+                        opts.backface_cull.get(obj).copied().unwrap_or(false),
+                    )
+                },
+            )
+        })
+        .collect();
+    let mut records: Vec<&Record> = chunks.iter().flat_map(|c| &c.0).collect();
+    if let Rule::Painter(rank) = rule {
+        // Drawing order; a triangle's sub-triangles stay together (stable).
+        records.sort_by_key(|r| rank.get(r.tri as usize).copied().unwrap_or(u32::MAX));
+    }
+    let culled = chunks.iter().fold(Culled::default(), |a, (_, c)| Culled {
+        frustum: a.frustum + c.frustum,
+        backface: a.backface + c.backface,
+    });
+
+    // Bin records to bands.
+    let bands = sh.div_ceil(BAND) as usize;
+    let mut counts = vec![0usize; bands + 1];
+    for r in &records {
+        for b in (r.rows.0 / BAND)..=((r.rows.1 - 1) / BAND) {
+            counts[b as usize + 1] += 1;
+        }
+    }
+    for b in 0..bands {
+        counts[b + 1] += counts[b];
+    }
+    let mut lists: Vec<&Record> =
+        vec![records.first().copied().unwrap_or(&EMPTY_RECORD); counts[bands]];
+    let mut fill = counts.clone();
+    for r in &records {
+        for b in (r.rows.0 / BAND)..=((r.rows.1 - 1) / BAND) {
+            lists[fill[b as usize]] = r;
+            fill[b as usize] += 1;
+        }
+    }
+
+    let total = (sw as usize) * (sh as usize);
+    let mut key = vec![u32::MAX; total];
+    let mut id = vec![BACKGROUND; total];
+    let depth_map = DepthMap {
+        format: opts.depth,
+        perspective,
+        near: cam.near(),
+        far: cam.far(),
+    };
+    let walk = Walk {
+        scene,
+        hv: &hv,
+        grid: &grid,
+        sw,
+        perspective,
+    };
+    let band_len = (BAND * sw) as usize;
+    let counters: Vec<(u64, u64)> = key
+        .par_chunks_mut(band_len)
+        .zip(id.par_chunks_mut(band_len))
+        .enumerate()
+        .map(|(b, (key, id))| {
+            let row0 = u32::try_from(b).unwrap_or(0) * BAND;
+            let rows = row0..(row0 + BAND).min(sh);
+            let mut writes = 0u64;
+            let mut frags = 0u64;
+            let mut band = Band {
+                key,
+                id,
+                row0,
+                depth_map: &depth_map,
+                overwrite: matches!(rule, Rule::Painter(_)),
+            };
+            for r in &lists[counts[b]..counts[b + 1]] {
+                let (w, f) = scan_record(&walk, r, rows.clone(), &mut band);
+                writes += w;
+                frags += f;
+            }
+            (writes, frags)
+        })
+        .collect();
+    let stats = RasterStats {
+        triangles: n_tris,
+        records: records.len(),
+        depth_writes: counters.iter().map(|c| c.0).sum(),
+        fragments: counters.iter().map(|c| c.1).sum(),
+        culled,
+        shadow_bvh: false,
+        shadow_rays: 0,
+        shadow_maps: 0,
+    };
+    VisibilityBuffers { key, id, stats }
+}
+
+fn setup_triangle(
+    v: &[HVert; 3],
+    tri: u32,
+    cull_back: bool,
+    ctx: &SetupCtx<'_>,
+    poly: &mut Vec<HVert>,
+    tmp: &mut Vec<HVert>,
+    out: &mut Vec<Record>,
+) -> bool {
+    let near = -ctx.clip_planes[0].c[4];
+    let far = ctx.clip_planes[1].c[4];
+    let guard_ok = |p: &(f64, f64)| p.0.abs() < GUARD_PX && p.1.abs() < GUARD_PX;
+    // The common case: between the near and far planes and inside the
+    // guard band.
+    if v.iter().all(|p| p.z >= near && p.z <= far) {
+        let s = [v[0].screen(), v[1].screen(), v[2].screen()];
+        if s.iter().all(guard_ok) {
+            return push_snapped(&s, tri, cull_back, ctx, out);
+        }
+    }
+    if v.iter().all(|p| p.z < near) || v.iter().all(|p| p.z > far) {
+        return false;
+    }
+    poly.clear();
+    poly.extend_from_slice(v);
+    for (k, plane) in ctx.clip_planes.iter().enumerate() {
+        // Planes 0 and 1 are near and far; the guard band only where needed.
+        if k > 1 && poly.iter().all(|p| guard_ok(&p.screen())) {
+            break;
+        }
+        clip_polygon(poly, plane, tmp);
+        std::mem::swap(poly, tmp);
+        if poly.len() < 3 {
+            return false;
+        }
+    }
+    // A vertex the guard planes made lies on one of them, up to the
+    // rounding of its interpolation; with an extreme dynamic range (a near
+    // plane of 1e-39 against coordinates of 1e33) that rounding can put it
+    // far outside (measured: 1e94 px). Clamping puts it back on the plane it
+    // belongs to; the clip computed each shared point once in a canonical
+    // order, so neighbours still share it bit for bit.
+    let (gx, gy) = (
+        f64::from(ctx.size.0 / ctx.grid.n) + GUARD_PX,
+        f64::from(ctx.size.1 / ctx.grid.n) + GUARD_PX,
+    );
+    let mut pts = Vec::with_capacity(poly.len());
+    for p in poly.iter() {
+        let (x, y) = p.screen();
+        if x.is_nan() || y.is_nan() {
+            return false;
+        }
+        pts.push((x.clamp(-GUARD_PX, gx), y.clamp(-GUARD_PX, gy)));
+    }
+    let mut culled = false;
+    for k in 1..pts.len() - 1 {
+        culled |= push_snapped(&[pts[0], pts[k], pts[k + 1]], tri, cull_back, ctx, out);
+    }
+    culled
+}
+
+/// Snaps a screen triangle and records it if it can cover a sample.
+fn push_snapped(
+    p: &[(f64, f64); 3],
+    tri: u32,
+    cull_back: bool,
+    ctx: &SetupCtx<'_>,
+    out: &mut Vec<Record>,
+) -> bool {
+    let s = p.map(|(x, y)| (Sub8::snap(x).0, Sub8::snap(y).0));
+    let area2 = doubled_area(&s);
+    let back = area2 >= 0;
+    if area2 == 0 {
+        return false;
+    }
+    if cull_back && back {
+        return true;
+    }
+    let (rows, cols) = bbox_samples(&s, ctx.grid, ctx.size);
+    if rows.is_empty() || cols.is_empty() {
+        return false;
+    }
+    #[expect(
+        clippy::cast_possible_truncation,
+        reason = "snapped coordinates are below 2^26"
+    )]
+    out.push(Record {
+        x: s.map(|q| q.0 as i32),
+        y: s.map(|q| q.1 as i32),
+        tri,
+        rows: (rows.start, rows.end),
+        back,
+        rule: ctx.rule,
+    });
+    false
+}
+
+/// The planes `λ_i = b_i/w` (2-D homogeneous rasterization, Olano & Greer
+/// 1997) and the depth plane of triangle `tri`, relative to `(ax, ay)`;
+/// `None` when the triangle's plane passes through the eye.
+fn triangle_planes(v: &[HVert; 3], perspective: bool, ax: f64, ay: f64) -> Option<Planes> {
+    // Columns h_i = (X_i·w_i, Y_i·w_i, w_i); λ = M⁻¹·(X, Y, 1). The rows of
+    // M⁻¹ are (h1 × h2, h2 × h0, h0 × h1) / det.
+    let h = v.map(|p| DVec3::new(p.xh, p.yh, p.w));
+    let rows = [h[1].cross(h[2]), h[2].cross(h[0]), h[0].cross(h[1])];
+    let det = h[0].dot(rows[0]);
+    // Singular relative to the columns' lengths: the plane passes through the eye.
+    let scale2 = h[0].length_squared() * h[1].length_squared() * h[2].length_squared();
+    if det == 0.0 || !det.is_finite() || det * det <= 1e-28 * scale2 {
+        return None;
+    }
+    let inv_det = 1.0 / det;
+    let mut lambda = [[0.0; 3]; 3];
+    for (l, r) in lambda.iter_mut().zip(rows) {
+        let r = r * inv_det;
+        // Relative to the anchor: λ_i = r_x·dx + r_y·dy + λ_i(anchor).
+        *l = [r.x, r.y, r.x * ax + r.y * ay + r.z];
+    }
+    // Depth plane: 1/z = Σλ (perspective); z = Σ λ_i z_i (orthographic, Σλ = 1).
+    let weights = if perspective {
+        [1.0; 3]
+    } else {
+        [v[0].z, v[1].z, v[2].z]
+    };
+    let mut depth = [0.0; 3];
+    for (w, l) in weights.iter().zip(&lambda) {
+        for c in 0..3 {
+            depth[c] += w * l[c];
+        }
+    }
+    Some(Planes {
+        lambda,
+        depth,
+        ax,
+        ay,
+    })
+}
+
+/// What every record of one frame is walked against: the scene, its
+/// projected vertices, the sample grid and its width, and the projection.
+#[derive(Clone, Copy)]
+struct Walk<'a> {
+    scene: &'a TriScene,
+    hv: &'a [HVert],
+    grid: &'a SampleGrid,
+    /// Samples per row.
+    sw: u32,
+    perspective: bool,
+}
+
+/// Walks the covered samples of one record over `rows`, stepping the
+/// perspective-correct planes incrementally along each span (anchored by
+/// direct evaluation at the span's first sample). `visit(row, col, λ, d)`
+/// receives the stepped `λ_i = b_i/w` and depth-plane value of each sample.
+fn walk_record(
+    walk: &Walk<'_>,
+    r: &Record,
+    rows: std::ops::Range<u32>,
+    mut visit: impl FnMut(u32, u32, &[f64; 3], f64, &Planes),
+) {
+    let Walk {
+        scene,
+        hv,
+        grid,
+        sw,
+        perspective,
+    } = *walk;
+    let Some(st) = r.snapped() else {
+        return;
+    };
+    let n = f64::from(grid.n);
+    let dx = 1.0 / n;
+    // The planes are set up on the first covered span only: most records
+    // of a dense mesh cover no sample at all.
+    let mut planes: Option<Option<(Planes, [f64; 3], f64)>> = None;
+    st.for_each_span(grid, rows, 0..sw, |row, cols| {
+        let setup = planes.get_or_insert_with(|| {
+            let idx = scene.tris[r.tri as usize];
+            let v = idx.map(|i| hv[i as usize]);
+            let (ax, ay) = (f64::from(r.x[0]) / 256.0, f64::from(r.y[0]) / 256.0);
+            triangle_planes(&v, perspective, ax, ay).map(|pl| {
+                let step_l = [
+                    pl.lambda[0][0] * dx,
+                    pl.lambda[1][0] * dx,
+                    pl.lambda[2][0] * dx,
+                ];
+                let step_d = pl.depth[0] * dx;
+                (pl, step_l, step_d)
+            })
+        });
+        let Some((pl, step_l, step_d)) = setup else {
+            return;
+        };
+        // Anchor: direct evaluation at the span's first sample.
+        let x0 = (f64::from(cols.start) + 0.5) * dx - pl.ax;
+        let y = (f64::from(row) + 0.5) * dx - pl.ay;
+        let mut l = [
+            Planes::eval(&pl.lambda[0], x0, y),
+            Planes::eval(&pl.lambda[1], x0, y),
+            Planes::eval(&pl.lambda[2], x0, y),
+        ];
+        let mut d = Planes::eval(&pl.depth, x0, y);
+        for col in cols {
+            visit(row, col, &l, d, pl);
+            l[0] += step_l[0];
+            l[1] += step_l[1];
+            l[2] += step_l[2];
+            d += *step_d;
+        }
+    });
+}
+
+/// One band's depth keys and triangle ids, and how a fragment enters them.
+struct Band<'b> {
+    key: &'b mut [u32],
+    id: &'b mut [u32],
+    /// The band's first sample row.
+    row0: u32,
+    depth_map: &'b DepthMap,
+    /// Every fragment wins (the painter), not only the nearest.
+    overwrite: bool,
+}
+
+/// Scans one record over `rows` (a band): each covered sample takes the
+/// record's triangle if it passes the depth test (or always, with
+/// `overwrite`: the painter); returns (writes, fragments).
+fn scan_record(
+    walk: &Walk<'_>,
+    r: &Record,
+    rows: std::ops::Range<u32>,
+    band: &mut Band<'_>,
+) -> (u64, u64) {
+    let sw = walk.sw;
+    let mut writes = 0u64;
+    let mut frags = 0u64;
+    walk_record(walk, r, rows, |row, col, _, d, _| {
+        let i = ((row - band.row0) * sw + col) as usize;
+        let k = band.depth_map.key(d);
+        frags += 1;
+        if band.overwrite || k < band.key[i] || (k == band.key[i] && r.tri < band.id[i]) {
+            band.key[i] = k;
+            band.id[i] = r.tri;
+            writes += 1;
+        }
+    });
+    (writes, frags)
+}
+
+/// What triangle setup needs besides the triangle.
+struct SetupCtx<'g> {
+    clip_planes: [clip::Plane; 6],
+    grid: &'g SampleGrid,
+    /// Sample grid size.
+    size: (u32, u32),
+    rule: FillRule,
+}
+
+/// The records of the triangles in `range`, in id order; `cull(object)`
+/// says whether to skip the object (frustum) and whether to cull its back
+/// faces.
+fn records(
+    scene: &TriScene,
+    hv: &[HVert],
+    range: std::ops::Range<usize>,
+    grid: &SampleGrid,
+    rule: FillRule,
+    cull: impl Fn(usize) -> (bool, bool),
+) -> (Vec<Record>, Culled) {
+    let cam = &scene.camera;
+    let ctx = SetupCtx {
+        clip_planes: planes(
+            cam.near(),
+            cam.far(),
+            f64::from(cam.width()),
+            f64::from(cam.height()),
+            GUARD_PX,
+        ),
+        grid,
+        size: (cam.sample_width(), cam.sample_height()),
+        rule,
+    };
+    let mut out = Vec::with_capacity(range.len());
+    let mut poly = Vec::with_capacity(8);
+    let mut tmp = Vec::with_capacity(8);
+    let mut culled = Culled::default();
+    for t in range {
+        let (skip, cull_back) = cull(scene.tri_object[t] as usize);
+        if skip {
+            culled.frustum += 1;
+            continue;
+        }
+        let v = scene.tris[t].map(|i| hv[i as usize]);
+        let tri = u32::try_from(t).unwrap_or(u32::MAX);
+        if setup_triangle(&v, tri, cull_back, &ctx, &mut poly, &mut tmp, &mut out) {
+            culled.backface += 1;
+        }
+    }
+    (out, culled)
+}
+
+/// Triangles the plan's culling removed from primary visibility.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Culled {
+    /// Triangles of objects entirely outside the view frustum.
+    pub frustum: usize,
+    /// Back faces of closed objects seen from outside.
+    pub backface: usize,
+}
+
+#[cfg(feature = "testing")]
+/// Calls `visit(tri, sx, sy, front)` for every sample the coverage rule
+/// gives each triangle (after near/guard clipping), serially, triangle by
+/// triangle in id order; `front` is false for a back face (doubled signed
+/// area ≥ 0). With `backface_cull`, back faces are skipped.
+pub fn cover(scene: &TriScene, backface_cull: bool, mut visit: impl FnMut(u32, u32, u32, bool)) {
+    let cam = &scene.camera;
+    let grid = SampleGrid::new(cam.samples());
+    let hv = homogeneous(scene, Perturb::default());
+    let (records, _) = records(scene, &hv, 0..scene.len(), &grid, FillRule::TopLeft, |_| {
+        (false, backface_cull)
+    });
+    for r in records {
+        let Some(st) = r.snapped() else { continue };
+        st.for_each_span(
+            &grid,
+            r.rows.0..r.rows.1,
+            0..cam.sample_width(),
+            |row, cols| {
+                for c in cols {
+                    visit(r.tri, c, row, !r.back);
+                }
+            },
+        );
+    }
+}
+
+#[cfg(feature = "testing")]
+/// Drift of the incremental interpolation against direct evaluation, over
+/// every covered sample of a scene.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Drift {
+    /// Samples compared.
+    pub samples: u64,
+    /// Largest |stepped − direct| / |direct| of the depth plane.
+    pub depth_rel: f64,
+    /// Largest |stepped − direct| of a normalised barycentric weight.
+    pub bary_abs: f64,
+    /// Largest span length in samples.
+    pub longest_span: u32,
+}
+
+#[cfg(feature = "testing")]
+/// Measures the drift of the incremental depth and barycentrics (the same
+/// walk the renderer uses) against direct evaluation of the planes.
+#[must_use]
+pub fn measure_drift(scene: &TriScene) -> Drift {
+    let cam = &scene.camera;
+    let grid = SampleGrid::new(cam.samples());
+    let hv = homogeneous(scene, Perturb::default());
+    let perspective = matches!(cam.projection(), Projection::Perspective { .. });
+    let n = f64::from(grid.n);
+    let mut drift = Drift::default();
+    let (records, _) = records(scene, &hv, 0..scene.len(), &grid, FillRule::TopLeft, |_| {
+        (false, false)
+    });
+    for r in records {
+        let mut span_len = 0u32;
+        let mut last_row = u32::MAX;
+        let walk = Walk {
+            scene,
+            hv: &hv,
+            grid: &grid,
+            sw: cam.sample_width(),
+            perspective,
+        };
+        walk_record(&walk, &r, r.rows.0..r.rows.1, |row, col, l, d, pl| {
+            if row != last_row {
+                last_row = row;
+                span_len = 0;
+            }
+            span_len += 1;
+            drift.longest_span = drift.longest_span.max(span_len);
+            let x = (f64::from(col) + 0.5) / n - pl.ax;
+            let y = (f64::from(row) + 0.5) / n - pl.ay;
+            let direct = [
+                Planes::eval(&pl.lambda[0], x, y),
+                Planes::eval(&pl.lambda[1], x, y),
+                Planes::eval(&pl.lambda[2], x, y),
+            ];
+            let dd = Planes::eval(&pl.depth, x, y);
+            if dd != 0.0 {
+                drift.depth_rel = drift.depth_rel.max(((d - dd) / dd).abs());
+            }
+            let sum_s = l[0] + l[1] + l[2];
+            let sum_d = direct[0] + direct[1] + direct[2];
+            for k in 0..3 {
+                drift.bary_abs = drift.bary_abs.max((l[k] / sum_s - direct[k] / sum_d).abs());
+            }
+            drift.samples += 1;
+        });
+    }
+    drift
+}
+
+/// The deferred shading pass; returns the frame, the shadow rays cast and
+/// the shadow maps built.
+fn shade_pass(
+    scene: &TriScene,
+    opts: &RasterOptions,
+    vis: &VisibilityBuffers,
+) -> (Frame, u64, usize) {
+    let cam = &scene.camera;
+    let sw = cam.sample_width();
+    let ctx = scene.shade_context(opts.gate_eps, opts.shadows_needed);
+    // Shadows: nothing when the plan says no shadow can fall; else a BVH
+    // for shadow rays (one `ShadowRays` per row, so its counter is never
+    // shared) or the shadow maps.
+    let accel = (opts.shadows_needed && opts.shadows == ShadowMode::Rays)
+        .then(|| Accel::new(scene, AccelOptions::default()));
+    let map = match (opts.shadows_needed, opts.shadows) {
+        (true, ShadowMode::Map(res)) => Some(shadow_map::ShadowMaps::new(scene, res)),
+        _ => None,
+    };
+    let mut frame = Frame::new(cam.width(), cam.height(), cam.samples(), scene.background);
+    let w = sw as usize;
+    let (colors, depths, id_buf, flag_buf) = frame.sample_buffers_mut();
+    let shadow_rays: u64 = colors
+        .par_chunks_mut(w)
+        .zip(depths.par_chunks_mut(w))
+        .zip(id_buf.par_chunks_mut(w))
+        .zip(flag_buf.par_chunks_mut(w))
+        .enumerate()
+        .map(|(sy, (((color, depth), ids), flags))| {
+            let rays = accel.as_ref().map(ShadowRays::new);
+            let visibility: &dyn Visibility = match (&rays, &map) {
+                (Some(r), _) => r,
+                (None, Some(m)) => m,
+                (None, None) => &Unoccluded,
+            };
+            let sy = u32::try_from(sy).unwrap_or(0);
+            for sx in 0..sw {
+                let i = (sy as usize) * w + sx as usize;
+                let tri = vis.id[i];
+                if tri == BACKGROUND {
+                    continue;
+                }
+                // The weights the ray tracer shades with: the f64 camera
+                // ray of this sample against the visible triangle.
+                let (x, y) = cam.sample_point(sx, sy);
+                let (o64, d64) = cam.primary_ray_f64(x, y);
+                let (b, p64) = scene.view_weights(tri, o64, d64);
+                let sp = scene.surface_at(tri, b);
+                let ray = cam.primary_ray(x, y);
+                let shaded = shade::shade(&ctx, &sp, ray.dir, visibility);
+                let c = shaded.local;
+                let finite = |x: f32| if x.is_finite() { x } else { 0.0 };
+                color[sx as usize] = Rgb::new(finite(c.r), finite(c.g), finite(c.b));
+                #[expect(clippy::cast_possible_truncation, reason = "frame depth is f32")]
+                {
+                    depth[sx as usize] = cam.frame_depth(p64) as f32;
+                }
+                ids[sx as usize] = tri;
+                flags[sx as usize] = shaded.flags;
+            }
+            rays.as_ref().map_or(0, ShadowRays::cast)
+        })
+        .sum();
+    frame.resolve();
+    let maps = map.as_ref().map_or(0, shadow_map::ShadowMaps::count);
+    (frame, shadow_rays, maps)
+}

@@ -1,0 +1,1078 @@
+//! OBJ meshes: a strict reader in one pass that names the line of every
+//! problem, collects positions, normals, uvs and faces as it reads them,
+//! triangulates faces with more than three corners by the constrained
+//! Delaunay triangulation, and reserves what it builds in the memory
+//! budget as it goes.
+//!
+//! The data it gives is laid out as `tobj` (which loaded the data before)
+//! laid it out, so meshes, their triangles and every image made of them
+//! are unchanged: the faces are grouped into models at `o` and `g`
+//! statements (a new model once the current one has faces); each model
+//! lists the positions, normals and uvs its faces use in the order they
+//! are first used, and the triangles index those lists. A model whose
+//! first corner has no uv while the file has uvs by the model's end starts
+//! its uv list with the file's first uv (tobj's stand-in for the missing
+//! one); normals alike. Faces without a uv (or a normal) on every corner
+//! get none.
+
+use std::path::{Path, PathBuf};
+
+use super::error::LoadError;
+use crate::polygon::{self, PolygonError, PolygonOptions};
+use rendiff_core::budget::Budget;
+use rendiff_core::math::{DVec3, Vec2, Vec3};
+
+/// Bytes the budget counts per `v` and per `vn` line while reading: the
+/// file's position (12 B) and the index of its copy in the model (4 B).
+pub(crate) const BYTES_PER_READ_VERTEX: u64 = 16;
+
+/// Bytes counted per `vt` line while reading: 8 B and a 4 B index.
+pub(crate) const BYTES_PER_READ_UV: u64 = 12;
+
+/// Bytes counted per position, normal and uv a model copies (12, 12, 8 B:
+/// the arrays of [`MeshData`]).
+const BYTES_PER_COPY: [u64; 3] = [12, 12, 8];
+
+/// Bytes counted per triangle a face will become (its corners minus 2):
+/// what tessellation counts per triangle (`tessellate::BYTES_PER_TRIANGLE`,
+/// which `scene` may not name; `tests/it/bad_input.rs` checks the two
+/// agree), so a mesh too big to render is refused while it is read.
+pub const BYTES_PER_TRIANGLE_TO_BE: u64 = 200;
+
+/// Lines read between two reservations (a face of many corners reserves
+/// at once).
+const LINES_PER_RESERVATION: usize = 4096;
+
+/// Bytes counted since the last reservation that make one at once.
+const BYTES_PER_RESERVATION: u64 = 1 << 20;
+
+/// One triangle of a mesh: indices into the mesh's positions, normals and uvs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct MeshTri {
+    /// Position indices.
+    pub v: [u32; 3],
+    /// Normal indices, when the face has `vn` on every corner.
+    pub n: Option<[u32; 3]>,
+    /// uv indices, when the face has `vt` on every corner.
+    pub t: Option<[u32; 3]>,
+}
+
+/// A loaded, triangulated mesh in object space.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MeshData {
+    /// The OBJ file.
+    pub path: PathBuf,
+    /// Vertex positions.
+    pub positions: Vec<Vec3>,
+    /// Normals (as written; normalised where used).
+    pub normals: Vec<Vec3>,
+    /// Texture coordinates.
+    pub uvs: Vec<Vec2>,
+    /// Triangles.
+    pub triangles: Vec<MeshTri>,
+    /// The OBJ line of each triangle's face.
+    pub lines: Vec<u32>,
+    /// Number of faces in the file.
+    pub faces: usize,
+}
+
+impl MeshData {
+    /// `true` when every triangle has uvs.
+    #[must_use]
+    pub fn has_uv(&self) -> bool {
+        !self.triangles.is_empty() && self.triangles.iter().all(|t| t.t.is_some())
+    }
+
+    /// The first line whose face has no uv.
+    #[must_use]
+    pub fn first_face_without_uv(&self) -> Option<u32> {
+        self.triangles
+            .iter()
+            .zip(&self.lines)
+            .find(|(t, _)| t.t.is_none())
+            .map(|(_, l)| *l)
+    }
+}
+
+fn mesh_err(path: &Path, line: usize, message: impl Into<String>) -> LoadError {
+    LoadError::Mesh {
+        path: path.to_path_buf(),
+        line: Some(line),
+        message: message.into(),
+    }
+}
+
+/// A number of the file, or what is wrong with it.
+fn parse_f32(tok: &str) -> Result<f32, String> {
+    match tok.parse::<f32>() {
+        Ok(v) if v.is_finite() => Ok(v),
+        parsed => match tok.parse::<f64>() {
+            Ok(v) if v.is_finite() => Err(format!(
+                "`{}` is outside the f32 range (a magnitude above {:e})",
+                shown(tok),
+                f32::MAX
+            )),
+            Ok(_) => Err(format!("`{}` is not a finite number", shown(tok))),
+            Err(_) if parsed.is_ok() => Err(format!("`{}` is not a finite number", shown(tok))),
+            Err(_) => Err(format!("`{}` is not a number", shown(tok))),
+        },
+    }
+}
+
+/// A token as shown in a message: [`rendiff_core::escape::excerpt`].
+fn shown(tok: &str) -> String {
+    rendiff_core::escape::excerpt(tok.as_bytes())
+}
+
+/// The lines of a text: `\n`, `\r\n` and a lone `\r` each end one.
+fn lines(text: &str) -> impl Iterator<Item = &str> {
+    let mut rest = text;
+    std::iter::from_fn(move || {
+        if rest.is_empty() {
+            return None;
+        }
+        let bytes = rest.as_bytes();
+        let Some(end) = bytes.iter().position(|&b| b == b'\n' || b == b'\r') else {
+            let line = rest;
+            rest = "";
+            return Some(line);
+        };
+        let line = &rest[..end];
+        let skip = if bytes[end] == b'\r' && bytes.get(end + 1) == Some(&b'\n') {
+            2
+        } else {
+            1
+        };
+        rest = &rest[end + skip..];
+        Some(line)
+    })
+}
+
+/// Splits a line's content into `out` at white space (`char::is_whitespace`,
+/// with a fast path for ASCII).
+fn tokenize<'a>(content: &'a str, out: &mut Vec<&'a str>) {
+    out.clear();
+    if !content.is_ascii() {
+        out.extend(content.split_whitespace());
+        return;
+    }
+    // The ASCII characters `char::is_whitespace` accepts.
+    let space = |b: u8| matches!(b, b' ' | b'\t' | b'\n' | 0x0B | 0x0C | b'\r');
+    let bytes = content.as_bytes();
+    let mut i = 0;
+    while i < bytes.len() {
+        while i < bytes.len() && space(bytes[i]) {
+            i += 1;
+        }
+        let start = i;
+        while i < bytes.len() && !space(bytes[i]) {
+            i += 1;
+        }
+        if i > start {
+            out.push(&content[start..i]);
+        }
+    }
+}
+
+/// A polygon error of a face with more than three corners, in the face's
+/// own terms: its corners as written on the line.
+fn face_error(e: &PolygonError, corners: &[&str]) -> String {
+    let c = |i: usize| {
+        corners
+            .get(i)
+            .map_or_else(|| format!("#{i}"), |s| format!("`{}`", shown(s)))
+    };
+    let n = corners.len();
+    match e {
+        PolygonError::SelfIntersecting { a, b } => format!(
+            "the face's edges {}–{} and {}–{} cross, touch or overlap; a face must be a simple polygon",
+            c(a.from),
+            c(a.to),
+            c(b.from),
+            c(b.to)
+        ),
+        PolygonError::Spike { from, to, .. } => format!(
+            "the face runs from corner {} to corner {} and straight back (a spike with no area)",
+            c(*from),
+            c(*to)
+        ),
+        PolygonError::TooFewPoints { distinct, .. } => format!(
+            "the face's {n} corners have only {distinct} distinct positions; a face needs at least 3"
+        ),
+        PolygonError::Collinear => {
+            format!("the face's {n} corners all lie on one line; a face needs an area")
+        }
+        other => format!("face with {n} corners: {other}"),
+    }
+}
+
+/// No copy yet.
+const NONE: u32 = u32::MAX;
+
+/// The entries of one kind (positions, normals or uvs) as the file gives
+/// them, and where the current model has copied each.
+struct Pool<T> {
+    /// The file's entries, in file order.
+    file: Vec<T>,
+    /// For each file entry, the index of its copy in the mesh's list;
+    /// stale below `start` (an earlier model's).
+    copy: Vec<u32>,
+    /// Where the current model's entries start in the mesh's list.
+    start: u32,
+    /// The model's first corner had no entry of this kind: the file's
+    /// first entry stands in as the model's first one, once it is known
+    /// that the file has one by the model's end (tobj).
+    stand_in: bool,
+}
+
+impl<T: Copy> Pool<T> {
+    fn new() -> Pool<T> {
+        Pool {
+            file: Vec::new(),
+            copy: Vec::new(),
+            start: 0,
+            stand_in: false,
+        }
+    }
+
+    fn push(&mut self, entry: T) {
+        self.file.push(entry);
+        self.copy.push(NONE);
+    }
+
+    /// The mesh's index of file entry `g`, copying it on first use in the
+    /// model; also says how many entries it copied.
+    fn index(&mut self, g: usize, out: &mut Vec<T>) -> (u32, u64) {
+        let stand_in = u64::from(self.place_stand_in(out));
+        let c = self.copy[g];
+        if c != NONE && c >= self.start {
+            return (c, stand_in);
+        }
+        let i = u32::try_from(out.len()).unwrap_or(NONE - 1);
+        out.push(self.file[g]);
+        self.copy[g] = i;
+        (i, stand_in + 1)
+    }
+
+    /// Puts the pending stand-in in place (the file has entries now).
+    fn place_stand_in(&mut self, out: &mut Vec<T>) -> bool {
+        if !self.stand_in || self.file.is_empty() {
+            return false;
+        }
+        self.stand_in = false;
+        self.copy[0] = u32::try_from(out.len()).unwrap_or(NONE - 1);
+        out.push(self.file[0]);
+        true
+    }
+
+    /// Ends the model.
+    fn end_model(&mut self, out: &mut Vec<T>) -> bool {
+        let placed = self.place_stand_in(out);
+        self.stand_in = false;
+        self.start = u32::try_from(out.len()).unwrap_or(NONE - 1);
+        placed
+    }
+}
+
+/// A face corner: file indices (from 0) of its position, uv and normal.
+#[derive(Clone, Copy)]
+struct Corner {
+    v: usize,
+    t: Option<usize>,
+    n: Option<usize>,
+}
+
+/// The reader's state.
+struct Reader<'a> {
+    path: &'a Path,
+    budget: &'a Budget,
+    positions: Pool<Vec3>,
+    normals: Pool<Vec3>,
+    uvs: Pool<Vec2>,
+    data: MeshData,
+    /// Faces and corners of the current model.
+    model_faces: usize,
+    model_corners: usize,
+    /// Triangles the faces become, at most (corners − 2 each).
+    triangles_to_be: u64,
+    /// Bytes reserved so far, and counted since.
+    reserved: u64,
+    pending: u64,
+    lines_since: usize,
+    /// Buffers for a face: its corners, and their indices in the mesh.
+    corners: Vec<Corner>,
+    indices: [Vec<u32>; 3],
+}
+
+impl Reader<'_> {
+    fn err(&self, line: usize, message: impl Into<String>) -> LoadError {
+        mesh_err(self.path, line, message)
+    }
+
+    /// Counts `bytes` and reserves what was counted when it is enough.
+    fn count(&mut self, line: usize, bytes: u64) -> Result<(), LoadError> {
+        self.pending = self.pending.saturating_add(bytes);
+        if self.pending >= BYTES_PER_RESERVATION {
+            self.reserve(line)?;
+        }
+        Ok(())
+    }
+
+    /// Reserves what was counted since the last reservation.
+    fn reserve(&mut self, line: usize) -> Result<(), LoadError> {
+        self.lines_since = 0;
+        if self.pending == 0 {
+            return Ok(());
+        }
+        let total = self.reserved.saturating_add(self.pending);
+        self.budget
+            .reserve(self.pending, || {
+                format!(
+                    "the mesh up to line {line} ({} in all: {} positions, {} normals, {} uvs, {} triangles to be)",
+                    rendiff_core::budget::human(total),
+                    self.positions.file.len(),
+                    self.normals.file.len(),
+                    self.uvs.file.len(),
+                    self.triangles_to_be
+                )
+            })
+            .map_err(|e| self.err(line, e.to_string()))?;
+        self.reserved = total;
+        self.pending = 0;
+        Ok(())
+    }
+
+    /// The numbers of a `v`, `vt` or `vn` line.
+    fn numbers(
+        &self,
+        line: usize,
+        kw: &str,
+        args: &[&str],
+        counts: &[usize],
+        what: &str,
+    ) -> Result<[f32; 6], LoadError> {
+        if !counts.contains(&args.len()) {
+            let accepted = match counts {
+                [n] => n.to_string(),
+                [a, b] => format!("{a} or {b}"),
+                [first, .., last] if counts.windows(2).all(|w| w[1] == w[0] + 1) => {
+                    format!("{first} to {last}")
+                }
+                [init @ .., last] => {
+                    let init: Vec<String> = init.iter().map(usize::to_string).collect();
+                    format!("{} or {last}", init.join(", "))
+                }
+                [] => "no".to_string(),
+            };
+            return Err(self.err(
+                line,
+                format!(
+                    "`{kw}` needs {accepted} numbers ({what}), found {}",
+                    args.len()
+                ),
+            ));
+        }
+        let mut out = [0.0; 6];
+        for (o, a) in out.iter_mut().zip(args) {
+            *o = parse_f32(a).map_err(|m| self.err(line, m))?;
+        }
+        Ok(out)
+    }
+
+    fn vertex(&mut self, line: usize, args: &[&str]) -> Result<(), LoadError> {
+        let x = self.numbers(line, "v", args, &[3, 4, 6], "x y z, x y z w or x y z r g b")?;
+        if args.len() == 4 && x[3] <= 0.0 {
+            return Err(self.err(
+                line,
+                format!(
+                    "the weight w = `{}` of `v` must be > 0 (x y z w; w is otherwise ignored)",
+                    shown(args[3])
+                ),
+            ));
+        }
+        self.positions.push(Vec3::new(x[0], x[1], x[2]));
+        self.count(line, BYTES_PER_READ_VERTEX)
+    }
+
+    fn uv(&mut self, line: usize, args: &[&str]) -> Result<(), LoadError> {
+        let x = self.numbers(line, "vt", args, &[1, 2, 3], "u [v] [w]")?;
+        if let Some(a) = args
+            .iter()
+            .zip(x)
+            .take(2)
+            .find(|(_, v)| f64::from(v.abs()) > super::MAX_UV)
+        {
+            return Err(self.err(
+                line,
+                format!(
+                    "texture coordinate `{}` is beyond ±{:e} (f32 resolves it to a sixteenth of a repeat or worse)",
+                    shown(a.0),
+                    super::MAX_UV
+                ),
+            ));
+        }
+        self.uvs.push(Vec2::new(x[0], x[1]));
+        self.count(line, BYTES_PER_READ_UV)
+    }
+
+    fn normal(&mut self, line: usize, args: &[&str]) -> Result<(), LoadError> {
+        let x = self.numbers(line, "vn", args, &[3], "x y z")?;
+        self.normals.push(Vec3::new(x[0], x[1], x[2]));
+        self.count(line, BYTES_PER_READ_VERTEX)
+    }
+
+    /// Parses and checks the corners of a face into `self.corners`.
+    fn parse_corners(&mut self, line: usize, args: &[&str]) -> Result<(), LoadError> {
+        let counts = [
+            self.positions.file.len(),
+            self.uvs.file.len(),
+            self.normals.file.len(),
+        ];
+        let mut corners = std::mem::take(&mut self.corners);
+        corners.clear();
+        for corner in args {
+            let mut parts = corner.split('/');
+            let (v, t, n) = (parts.next(), parts.next(), parts.next());
+            if parts.next().is_some() || v.is_none_or(str::is_empty) {
+                return Err(self.err(
+                    line,
+                    format!(
+                        "malformed face corner `{}`; expected v, v/vt, v//vn or v/vt/vn",
+                        shown(corner)
+                    ),
+                ));
+            }
+            let idx = |s: &str, kind: usize| -> Result<usize, LoadError> {
+                let count = counts[kind];
+                let i: i64 = s.parse().map_err(|_| {
+                    self.err(
+                        line,
+                        format!(
+                            "`{}` in corner `{}` is not an integer index",
+                            shown(s),
+                            shown(corner)
+                        ),
+                    )
+                })?;
+                let back = usize::try_from(i.unsigned_abs()).unwrap_or(usize::MAX);
+                match i.signum() {
+                    1 if back <= count => Ok(back - 1),
+                    -1 if back <= count => Ok(count - back),
+                    _ => Err(self.err(
+                        line,
+                        format!(
+                            "{} index {i} in corner `{}` is out of range (1 … {count}, or -1 … -{count}, defined so far)",
+                            ["vertex", "texture", "normal"][kind],
+                            shown(corner)
+                        ),
+                    )),
+                }
+            };
+            let v = idx(v.unwrap_or(""), 0)?;
+            let t = t.filter(|s| !s.is_empty()).map(|s| idx(s, 1)).transpose()?;
+            let n = n.filter(|s| !s.is_empty()).map(|s| idx(s, 2)).transpose()?;
+            corners.push(Corner { v, t, n });
+        }
+        self.corners = corners;
+        Ok(())
+    }
+
+    fn face(&mut self, line: usize, args: &[&str]) -> Result<(), LoadError> {
+        if args.len() < 3 {
+            return Err(self.err(
+                line,
+                format!("a face needs at least 3 corners, found {}", args.len()),
+            ));
+        }
+        self.parse_corners(line, args)?;
+        let to_be = (args.len() - 2) as u64;
+        self.triangles_to_be += to_be;
+        self.count(line, to_be * BYTES_PER_TRIANGLE_TO_BE)?;
+
+        // The mesh's indices of the corners, copying on first use.
+        let corners = std::mem::take(&mut self.corners);
+        let [mut v, mut t, mut n] = std::mem::take(&mut self.indices);
+        v.clear();
+        t.clear();
+        n.clear();
+        let has_t = corners.iter().all(|c| c.t.is_some());
+        let has_n = corners.iter().all(|c| c.n.is_some());
+        let mut copied = 0u64;
+        for c in &corners {
+            let first = self.model_corners == 0;
+            self.model_corners += 1;
+            let (i, new) = self.positions.index(c.v, &mut self.data.positions);
+            copied += new * BYTES_PER_COPY[0];
+            v.push(i);
+            match c.t {
+                Some(g) => {
+                    let (i, new) = self.uvs.index(g, &mut self.data.uvs);
+                    copied += new * BYTES_PER_COPY[2];
+                    t.push(i);
+                }
+                None => self.uvs.stand_in |= first,
+            }
+            match c.n {
+                Some(g) => {
+                    let (i, new) = self.normals.index(g, &mut self.data.normals);
+                    copied += new * BYTES_PER_COPY[1];
+                    n.push(i);
+                }
+                None => self.normals.stand_in |= first,
+            }
+        }
+        self.model_faces += 1;
+        self.data.faces += 1;
+        self.pending += copied;
+
+        let number = u32::try_from(line).unwrap_or(u32::MAX);
+        let push = |data: &mut MeshData, c: [usize; 3]| {
+            data.triangles.push(MeshTri {
+                v: c.map(|k| v[k]),
+                n: has_n.then(|| c.map(|k| n[k])),
+                t: has_t.then(|| c.map(|k| t[k])),
+            });
+            data.lines.push(number);
+        };
+        if corners.len() == 3 {
+            push(&mut self.data, [0, 1, 2]);
+        } else {
+            let pts: Vec<DVec3> = v
+                .iter()
+                .map(|&i| {
+                    let p = self.data.positions[i as usize];
+                    DVec3::new(f64::from(p.x), f64::from(p.y), f64::from(p.z))
+                })
+                .collect();
+            let tri = polygon::triangulate(
+                &pts,
+                &[],
+                PolygonOptions {
+                    check_planarity: false,
+                },
+            )
+            .map_err(|e| self.err(line, face_error(&e, args)))?;
+            // The CDT triangles wind around the face's Newell normal,
+            // which follows the face's own winding.
+            for c in &tri.triangles {
+                push(&mut self.data, c.map(|i| i as usize));
+            }
+        }
+        self.corners = corners;
+        self.indices = [v, t, n];
+        Ok(())
+    }
+
+    /// Ends the current model (tobj's models: at `o`, `g` and the end).
+    fn end_model(&mut self) {
+        let mut copied = 0;
+        if self.normals.end_model(&mut self.data.normals) {
+            copied += BYTES_PER_COPY[1];
+        }
+        if self.uvs.end_model(&mut self.data.uvs) {
+            copied += BYTES_PER_COPY[2];
+        }
+        self.positions.end_model(&mut self.data.positions);
+        self.pending += copied;
+        self.model_faces = 0;
+        self.model_corners = 0;
+    }
+
+    fn statement(&mut self, line: usize, toks: &[&str]) -> Result<(), LoadError> {
+        let Some((&kw, args)) = toks.split_first() else {
+            return Ok(());
+        };
+        let named = |what: &str| -> Result<(), LoadError> {
+            if args.is_empty() {
+                return Err(self.err(line, format!("`{kw}` needs {what}")));
+            }
+            Ok(())
+        };
+        match kw {
+            "v" => self.vertex(line, args)?,
+            "vt" => self.uv(line, args)?,
+            "vn" => self.normal(line, args)?,
+            "f" => self.face(line, args)?,
+            "o" | "g" => {
+                named(if kw == "o" {
+                    "an object name"
+                } else {
+                    "a group name"
+                })?;
+                if self.model_faces > 0 {
+                    self.end_model();
+                }
+            }
+            "usemtl" => named("a material name")?,
+            "mtllib" => named("a file name")?,
+            "s" => named("a smoothing group (a number, or `off`)")?,
+            "l" | "p" => {}
+            other => {
+                let hint = if other.contains('\u{FFFD}') || other.chars().any(char::is_control) {
+                    " (the line is not text: is this an OBJ file?)"
+                } else {
+                    ""
+                };
+                return Err(self.err(
+                    line,
+                    format!(
+                        "unsupported OBJ statement `{}`; expected v, vt, vn, f, o, g, s, usemtl, mtllib, l or p{hint}",
+                        shown(other)
+                    ),
+                ));
+            }
+        }
+        self.lines_since += 1;
+        if self.lines_since >= LINES_PER_RESERVATION {
+            self.reserve(line)?;
+        }
+        Ok(())
+    }
+}
+
+/// Reads an OBJ text, reserving what it builds in `budget` as it goes;
+/// `reserved` says how much it reserved, error or not.
+fn read(
+    path: &Path,
+    bytes: &[u8],
+    budget: &Budget,
+    reserved: &mut u64,
+) -> Result<MeshData, LoadError> {
+    let text = String::from_utf8_lossy(bytes);
+    let text = text.strip_prefix('\u{FEFF}').unwrap_or(&text);
+    let mut r = Reader {
+        path,
+        budget,
+        positions: Pool::new(),
+        normals: Pool::new(),
+        uvs: Pool::new(),
+        data: MeshData {
+            path: path.to_path_buf(),
+            positions: Vec::new(),
+            normals: Vec::new(),
+            uvs: Vec::new(),
+            triangles: Vec::new(),
+            lines: Vec::new(),
+            faces: 0,
+        },
+        model_faces: 0,
+        model_corners: 0,
+        triangles_to_be: 0,
+        reserved: 0,
+        pending: 0,
+        lines_since: 0,
+        corners: Vec::new(),
+        indices: [Vec::new(), Vec::new(), Vec::new()],
+    };
+    let mut toks: Vec<&str> = Vec::new();
+    let mut last = 0;
+    let result = (|| {
+        for (k, raw) in lines(text).enumerate() {
+            last = k + 1;
+            let content = raw.find('#').map_or(raw, |i| &raw[..i]);
+            tokenize(content, &mut toks);
+            r.statement(last, &toks)?;
+        }
+        r.end_model();
+        if r.data.faces == 0 {
+            return Err(LoadError::Mesh {
+                path: path.to_path_buf(),
+                line: None,
+                message: "the mesh has no faces".into(),
+            });
+        }
+        r.reserve(last.max(1))
+    })();
+    *reserved = r.reserved;
+    result.map(|()| r.data)
+}
+
+/// Loads an OBJ file from its bytes (decoded lossily if not UTF-8) within
+/// the default memory budget.
+///
+/// # Errors
+///
+/// [`LoadError::Mesh`] naming the file and line of the first problem.
+pub fn load_obj_bytes(path: &Path, bytes: &[u8]) -> Result<MeshData, LoadError> {
+    read(path, bytes, &Budget::default(), &mut 0)
+}
+
+/// Bytes a loaded mesh holds per position, normal, uv and triangle
+/// (`MeshData`'s arrays).
+pub(crate) fn mesh_bytes(d: &MeshData) -> u64 {
+    (d.positions.len() * 12 + d.normals.len() * 12 + d.uvs.len() * 8 + d.triangles.len() * 44)
+        as u64
+}
+
+/// [`load_obj_bytes`] within `budget`: what the reader builds is reserved
+/// while it reads (every 4096 lines, or at once for a face of many
+/// corners), so a mesh too big for the budget is refused at the line it
+/// reached; once read, what the mesh holds stays reserved.
+///
+/// # Errors
+///
+/// As [`load_obj_bytes`], or the figure that does not fit the budget.
+pub(crate) fn load_obj_within(
+    path: &Path,
+    bytes: &[u8],
+    budget: &Budget,
+) -> Result<MeshData, LoadError> {
+    let mut reserved = 0;
+    let d = read(path, bytes, budget, &mut reserved);
+    budget.release(reserved);
+    let d = d?;
+    budget
+        .reserve(mesh_bytes(&d), || {
+            format!(
+                "the mesh's {} vertices and {} triangles",
+                d.positions.len(),
+                d.triangles.len()
+            )
+        })
+        .map_err(|e| LoadError::Mesh {
+            path: path.to_path_buf(),
+            line: None,
+            message: e.to_string(),
+        })?;
+    Ok(d)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn load(text: &str) -> Result<MeshData, LoadError> {
+        load_obj_bytes(Path::new("t.obj"), text.as_bytes())
+    }
+
+    #[test]
+    fn quad_is_triangulated_and_concave_face_is_not_fanned() {
+        let m = load("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n").unwrap();
+        assert_eq!(m.triangles.len(), 2);
+        // A concave "arrow" face: the fan from vertex 1 would leave the face.
+        let m = load("v 0 0 0\nv 2 1 0\nv 0 2 0\nv 1 1 0\nf 1 2 3 4\n").unwrap();
+        assert_eq!(m.triangles.len(), 2);
+        for t in &m.triangles {
+            // The reflex vertex (index 3, 0-based) must be in both triangles.
+            assert!(t.v.contains(&3), "{:?}", m.triangles);
+        }
+    }
+
+    #[test]
+    fn per_corner_normals_and_uvs_survive() {
+        let m = load(
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nvn 0 0 1\nf 1/1/1 2/2/1 3/3/1\nf 1 2 3\n",
+        )
+        .unwrap();
+        assert_eq!(m.triangles[0].t, Some([0, 1, 2]));
+        assert_eq!(m.triangles[0].n, Some([0, 0, 0]));
+        assert_eq!(m.triangles[1].t, None);
+        assert_eq!(m.triangles[1].n, None);
+        assert!(!m.has_uv());
+        assert_eq!(m.first_face_without_uv(), Some(9));
+    }
+
+    #[test]
+    fn errors_name_the_line() {
+        let e = load("v 0 0 0\nv 1 0 nan\n").unwrap_err().to_string();
+        assert!(e.starts_with("t.obj:2:"), "{e}");
+        let e = load("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("t.obj:4:") && e.contains("out of range"),
+            "{e}"
+        );
+        let e = load("v 0 0 0\n").unwrap_err().to_string();
+        assert!(e.contains("no faces"), "{e}");
+        let e = load("v 0 0 0\nbogus 1\n").unwrap_err().to_string();
+        assert!(e.starts_with("t.obj:2:"), "{e}");
+        let e = load("v 1e39 0 0\n").unwrap_err().to_string();
+        assert!(e.starts_with("t.obj:1:"), "{e}");
+    }
+
+    #[test]
+    fn bad_numbers_and_faces_say_what_is_wrong() {
+        let e = load("v 0 0,5 0\n").unwrap_err().to_string();
+        assert_eq!(e, "t.obj:1: `0,5` is not a number");
+        let e = load("v 0 inf 0\n").unwrap_err().to_string();
+        assert_eq!(e, "t.obj:1: `inf` is not a finite number");
+        let e = load("v 0 1e39 0\n").unwrap_err().to_string();
+        assert!(e.contains("outside the f32 range"), "{e}");
+        // A bow-tie quad: its edges are named by the corners as written.
+        let e = load("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 3 2 4\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("t.obj:5: the face's edges `1`–`3` and `2`–`4` cross"),
+            "{e}"
+        );
+        let e = load("\x01\x02 3\n").unwrap_err().to_string();
+        assert!(
+            e.contains("`\\u{1}\\u{2}`") && e.contains("is this an OBJ file?"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn negative_indices_and_lossy_utf8() {
+        let mut bytes = b"# caf\xe9\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf -3 -2 -1\n".to_vec();
+        bytes.push(b'\n');
+        let m = load_obj_bytes(Path::new("t.obj"), &bytes).unwrap();
+        assert_eq!(m.triangles.len(), 1);
+    }
+
+    fn err(text: &str) -> String {
+        load(text).unwrap_err().to_string()
+    }
+
+    const TRI: &str = "v 0 0 0\nv 1 0 0\nv 0 1 0\n";
+
+    #[test]
+    fn comments_start_anywhere() {
+        let m = load(&format!("{TRI}f 1 2 3#4\nv 9 9 9# a comment\n# f 1 2 4\n")).unwrap();
+        assert_eq!(m.triangles.len(), 1);
+        assert_eq!(m.triangles[0].v, [0, 1, 2]);
+        let m = load(&format!("{TRI}f 1 2 3 # 4\n")).unwrap();
+        assert_eq!(m.triangles.len(), 1);
+    }
+
+    #[test]
+    fn line_endings_and_a_byte_order_mark() {
+        let lf = load(&format!("{TRI}f 1 2 3\n")).unwrap();
+        for text in [
+            "v 0 0 0\r\nv 1 0 0\r\nv 0 1 0\r\nf 1 2 3\r\n",
+            "v 0 0 0\rv 1 0 0\rv 0 1 0\rf 1 2 3\r",
+            "v 0 0 0\rv 1 0 0\nv 0 1 0\r\nf 1 2 3",
+            "\u{FEFF}v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
+        ] {
+            assert_eq!(load(text).unwrap(), lf, "{text:?}");
+        }
+        // Lines are counted at every kind of break.
+        let e = err("v 0 0 0\rv 1 0 0\r\nv 0 1 0\rf 1 2 4\n");
+        assert!(e.starts_with("t.obj:4: vertex index 4"), "{e}");
+        let e = err("\u{FEFF}v 0 0\n");
+        assert!(e.starts_with("t.obj:1: `v` needs"), "{e}");
+    }
+
+    #[test]
+    fn vertex_counts_and_weights() {
+        // x y z w (w ignored, as Blender does) and x y z r g b.
+        let m = load("v 0 0 0 2\nv 1 0 0 0.5\nv 0 1 0 0.1 0.2 0.3\nf 1 2 3\n").unwrap();
+        assert_eq!(
+            m.positions,
+            [Vec3::ZERO, Vec3::X, Vec3::Y],
+            "positions as written"
+        );
+        for n in [0, 1, 2, 5, 7] {
+            let v = vec!["1"; n].join(" ");
+            let e = err(&format!("{TRI}v {v}\n"));
+            assert_eq!(
+                e,
+                format!(
+                    "t.obj:4: `v` needs 3, 4 or 6 numbers (x y z, x y z w or x y z r g b), found {n}"
+                )
+            );
+        }
+        for w in ["0", "-1", "-0"] {
+            let e = err(&format!("{TRI}v 1 2 3 {w}\n"));
+            assert_eq!(
+                e,
+                format!(
+                    "t.obj:4: the weight w = `{w}` of `v` must be > 0 (x y z w; w is otherwise ignored)"
+                )
+            );
+        }
+        let e = err("v 1 2 3 inf\n");
+        assert_eq!(e, "t.obj:1: `inf` is not a finite number");
+    }
+
+    #[test]
+    fn uv_and_normal_counts() {
+        // `vt u` has v = 0; a third number is ignored.
+        let m = load(&format!("{TRI}vt 0.5\nvt 0.25 0.75 1\nf 1/1 2/2 3/1\n")).unwrap();
+        assert_eq!(m.uvs, [Vec2::new(0.5, 0.0), Vec2::new(0.25, 0.75)]);
+        for n in [0, 4] {
+            let e = err(&format!("vt {}\n", vec!["0"; n].join(" ")));
+            assert_eq!(
+                e,
+                format!("t.obj:1: `vt` needs 1 to 3 numbers (u [v] [w]), found {n}")
+            );
+        }
+        for n in [2, 4] {
+            let e = err(&format!("vn {}\n", vec!["0"; n].join(" ")));
+            assert_eq!(
+                e,
+                format!("t.obj:1: `vn` needs 3 numbers (x y z), found {n}")
+            );
+        }
+    }
+
+    #[test]
+    fn statements_need_their_names() {
+        let ok = format!(
+            "mtllib a.mtl\no thing\ng left right\nusemtl red\ns off\ns 0\ns 1\nl 1 2\np 1\n{TRI}f 1 2 3\n"
+        );
+        assert_eq!(load(&ok).unwrap().triangles.len(), 1);
+        for (line, message) in [
+            ("o", "`o` needs an object name"),
+            ("g", "`g` needs a group name"),
+            ("usemtl", "`usemtl` needs a material name"),
+            ("mtllib # a.mtl", "`mtllib` needs a file name"),
+            ("s", "`s` needs a smoothing group (a number, or `off`)"),
+        ] {
+            let e = err(&format!("{TRI}f 1 2 3\n{line}\n"));
+            assert_eq!(e, format!("t.obj:5: {message}"));
+        }
+    }
+
+    #[test]
+    fn binary_garbage_is_quoted_briefly() {
+        // 8 MB of NULs: one line, one token.
+        let nuls = vec![0u8; 8 << 20];
+        let e = load_obj_bytes(Path::new("t.obj"), &nuls)
+            .unwrap_err()
+            .to_string();
+        assert!(e.len() < 400, "{} bytes: {e}", e.len());
+        let quoted = "\\0".repeat(40);
+        assert!(
+            e.starts_with(&format!("t.obj:1: unsupported OBJ statement `{quoted}…`"))
+                && e.ends_with("(the line is not text: is this an OBJ file?)"),
+            "{e}"
+        );
+        // A number of a million digits (1e100).
+        let e = err(&format!(
+            "v 0 0 {}1{}\n",
+            "0".repeat(1_000_000),
+            "0".repeat(100)
+        ));
+        assert_eq!(
+            e,
+            format!(
+                "t.obj:1: `{}…` is outside the f32 range (a magnitude above {:e})",
+                "0".repeat(40),
+                f32::MAX
+            )
+        );
+        let e = err(&format!("{TRI}f 1 2 {}\n", "3/".repeat(100)));
+        assert!(e.len() < 300, "{e}");
+    }
+
+    #[test]
+    fn models_list_what_they_use_in_order_of_use() {
+        // As tobj laid meshes out: each model (at `o`/`g`, once it has
+        // faces) copies the positions, uvs and normals its faces use, in
+        // the order they are first used; unused ones are left out.
+        let m = load(
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nv 5 5 5\n\
+             vt 0 0\nvt 1 0\nvt 0 1\nvn 0 0 1\n\
+             g a\nf 2/3 3/2 4/1\ng b\ng c\nf 1 2 3\nf 3/1/1 2/1/1 1/2/1\no d\n",
+        )
+        .unwrap();
+        let p = |x: f32, y: f32| Vec3::new(x, y, 0.0);
+        assert_eq!(
+            m.positions,
+            [
+                p(1.0, 0.0),
+                p(0.0, 1.0),
+                p(1.0, 1.0),
+                p(0.0, 0.0),
+                p(1.0, 0.0),
+                p(0.0, 1.0)
+            ]
+        );
+        let tris: Vec<_> = m.triangles.iter().map(|t| (t.v, t.t, t.n)).collect();
+        assert_eq!(
+            tris,
+            [
+                ([0, 1, 2], Some([0, 1, 2]), None),
+                ([3, 4, 5], None, None),
+                ([5, 4, 3], Some([3, 3, 4]), Some([1, 1, 1])),
+            ]
+        );
+        // Model a's uvs: vt 3, 2, 1. Model b+c's first corner has no uv:
+        // the file's first uv stands in as its first one (tobj), then vt
+        // 1 is that one, vt 2 a new one. Normals: model a's first corner
+        // has none and the file has one by the model's end, so it stands
+        // in there; model b+c's likewise, and `vn 1` is it.
+        assert_eq!(
+            m.uvs,
+            [
+                Vec2::new(0.0, 1.0),
+                Vec2::new(1.0, 0.0),
+                Vec2::new(0.0, 0.0),
+                Vec2::new(0.0, 0.0),
+                Vec2::new(1.0, 0.0),
+            ]
+        );
+        assert_eq!(m.normals, [Vec3::Z, Vec3::Z]);
+        assert_eq!(m.lines, [11, 14, 15]);
+        assert_eq!(m.faces, 3);
+    }
+
+    #[test]
+    fn a_face_of_100_000_corners_is_quick() {
+        let n = 100_000;
+        let mut text = String::new();
+        for k in 0..n {
+            let a = std::f64::consts::TAU * f64::from(k) / f64::from(n);
+            let r = if k % 2 == 1 { 0.6 } else { 1.0 };
+            text += &format!("v {} {} 0\n", r * a.cos(), r * a.sin());
+        }
+        text += "f";
+        for k in 1..=n {
+            text += &format!(" {k}");
+        }
+        text += "\n";
+        let m = load(&text).unwrap();
+        assert_eq!(m.triangles.len(), n as usize - 2);
+    }
+
+    #[test]
+    fn the_budget_is_reserved_while_reading() {
+        // 1 M faces would be 200 MB of triangles: refused at the line
+        // reached, long before the end, with the figure.
+        let mut text = String::from(TRI);
+        text += &"f 1 2 3\n".repeat(1 << 20);
+        let budget = Budget::new(16 << 20);
+        let e = load_obj_within(Path::new("t.obj"), text.as_bytes(), &budget).unwrap_err();
+        let LoadError::Mesh {
+            line: Some(line),
+            message,
+            ..
+        } = &e
+        else {
+            panic!("{e}")
+        };
+        assert!(*line < 100_000, "{e}");
+        assert!(
+            message.starts_with(&format!("the mesh up to line {line} (")),
+            "{message}"
+        );
+        assert!(
+            message.contains("triangles to be)")
+                && message.contains("over the memory budget of 16.0 MiB"),
+            "{message}"
+        );
+        assert_eq!(budget.used(), 0, "what was reserved is given back");
+        // One face of many corners reserves at once, before it is
+        // triangulated.
+        let mut text = String::from(TRI);
+        text += "f";
+        text += &" 1 2 3".repeat(100_000);
+        let budget = Budget::new(1 << 20);
+        let e = load_obj_within(Path::new("t.obj"), text.as_bytes(), &budget)
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("t.obj:4: the mesh up to line 4 ("), "{e}");
+        // What fits: the mesh's arrays stay reserved, nothing else.
+        let budget = Budget::new(1 << 20);
+        let m = load_obj_within(
+            Path::new("t.obj"),
+            format!("{TRI}f 1 2 3\n").as_bytes(),
+            &budget,
+        )
+        .unwrap();
+        assert_eq!(budget.used(), mesh_bytes(&m));
+    }
+}

@@ -1,0 +1,438 @@
+//! `rendiff diff`: render a scene two ways (or once, against an image) and
+//! deliver the verdict with its pictures.
+
+use std::path::{Path, PathBuf};
+
+use crate::color::Rgb;
+use crate::compare::maps::{self, Picture};
+use crate::compare::report::{Report, Times, scene_html};
+use crate::compare::{self, Comparison, ImageTolerances, Tolerances};
+use crate::frame::Frame;
+use crate::image_io::{self, PngEncoding};
+use crate::scene::LoadError;
+use crate::{Backend, Error, Prepared};
+
+/// One side of a comparison.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Side {
+    /// A backend renders it.
+    Backend(Backend),
+    /// A stored image (read as linear when 16-bit with gAMA 1.0, else sRGB).
+    Image(PathBuf),
+    /// The POV-Ray reference: stored in the golden folder, or rendered now.
+    Pov {
+        /// The folder of the stored references (`golden/pov`).
+        golden_dir: PathBuf,
+        /// Render it with POV-Ray instead of reading the stored one.
+        render: bool,
+    },
+}
+
+impl Side {
+    /// Parses `--a`/`--b`: a path when the text contains `.` or `/`.
+    ///
+    /// # Errors
+    ///
+    /// A message naming the accepted values.
+    pub fn parse(s: &str) -> Result<Side, String> {
+        if s.contains('.') || s.contains('/') {
+            return Ok(Side::Image(PathBuf::from(s)));
+        }
+        if s == "pov" {
+            return Ok(Side::Pov {
+                golden_dir: PathBuf::from("golden/pov"),
+                render: false,
+            });
+        }
+        s.parse::<Backend>().map(Side::Backend).map_err(|_| {
+            format!(
+                "unknown side \"{s}\"; expected a backend (raster, ray, painter), pov, or a PATH.png"
+            )
+        })
+    }
+
+    fn label(&self) -> String {
+        match self {
+            Side::Backend(b) => b.to_string(),
+            Side::Image(p) => p.display().to_string(),
+            Side::Pov { .. } => "pov".to_string(),
+        }
+    }
+
+    fn traces_ray_tree(&self) -> bool {
+        matches!(self, Side::Backend(Backend::Ray) | Side::Pov { .. })
+    }
+}
+
+/// What one side produced.
+#[derive(Debug)]
+pub enum Output {
+    /// A rendered frame and its time.
+    Frame(Frame, f64),
+    /// A stored image's pixels.
+    Image {
+        /// Width.
+        width: u32,
+        /// Height.
+        height: u32,
+        /// Linear pixels.
+        pixels: Vec<Rgb>,
+        /// Read as 16-bit linear (else 8-bit sRGB).
+        linear16: bool,
+        /// How long POV-Ray took, when it rendered the image just now.
+        rendered_ms: Option<f64>,
+    },
+}
+
+impl Output {
+    fn pixels(&self) -> &[Rgb] {
+        match self {
+            Output::Frame(f, _) => &f.color,
+            Output::Image { pixels, .. } => pixels,
+        }
+    }
+
+    fn frame(&self) -> Option<&Frame> {
+        match self {
+            Output::Frame(f, _) => Some(f),
+            Output::Image { .. } => None,
+        }
+    }
+
+    fn time(&self) -> Option<f64> {
+        match self {
+            Output::Frame(_, t) => Some(*t),
+            Output::Image { rendered_ms, .. } => *rendered_ms,
+        }
+    }
+}
+
+/// The full result of one scene's diff.
+#[derive(Debug)]
+pub struct DiffResult {
+    /// The verdict.
+    pub report: Report,
+    /// The comparison behind it.
+    pub comparison: Comparison,
+    /// Side a.
+    pub a: Output,
+    /// Side b.
+    pub b: Output,
+    /// The tolerances used.
+    pub tolerance: Tolerances,
+}
+
+/// The tolerances of a scene: derived, tightened by its `[tolerance]` table.
+///
+/// # Errors
+///
+/// [`Error::Load`] naming the key when the scene asks for a looser value
+/// than the derived one.
+pub fn tolerances(job: &Prepared) -> Result<(Tolerances, ImageTolerances), Error> {
+    let mut t = compare::derive_tolerances(&job.tri);
+    let mut it = ImageTolerances::default();
+    let s = &job.scene.tolerance;
+    let path = &job.scene.path;
+    let looser = |key: &str, loc, value: f64, derived: f64, dir: &str| {
+        Error::Load(LoadError::Key {
+            path: path.clone(),
+            loc,
+            key: format!("tolerance.{key}"),
+            message: format!(
+                "{value} is looser than the derived {derived:.3e}; [tolerance] may only tighten ({dir})"
+            ),
+        })
+    };
+    if let Some(v) = s.shading_max {
+        if v.value > t.shading_max {
+            return Err(looser(
+                "shading_max",
+                v.loc,
+                v.value,
+                t.shading_max,
+                "use a value ≤ the derived one",
+            ));
+        }
+        t.shading_max = v.value;
+    }
+    if let Some(v) = s.pov_max8 {
+        if v.value > it.pov_max8 {
+            return Err(looser(
+                "pov_max8",
+                v.loc,
+                v.value,
+                it.pov_max8,
+                "use a value ≤ the derived one",
+            ));
+        }
+        it.pov_max8 = v.value;
+    }
+    if let Some(v) = s.pov_fraction {
+        if v.value < it.pov_fraction || v.value > 1.0 {
+            return Err(looser(
+                "pov_fraction",
+                v.loc,
+                v.value,
+                it.pov_fraction,
+                "use a value between the derived one and 1",
+            ));
+        }
+        it.pov_fraction = v.value;
+    }
+    Ok((t, it))
+}
+
+/// Renders or reads one side; a painter also says how its order went.
+fn produce(job: &Prepared, side: &Side, max_depth: u32) -> Result<(Output, Option<String>), Error> {
+    let out = match side {
+        Side::Pov { golden_dir, render } => {
+            use crate::pov::golden::{self, Variant};
+            let variant = if job.settings.geometry == crate::options::Geometry::Analytic {
+                // POV-Ray's own primitives (rendered at the scene's depth).
+                Variant::Analytic
+            } else if max_depth == 1 && job.tri.max_depth > 1 {
+                Variant::Depth1
+            } else {
+                Variant::Main
+            };
+            let started = std::time::Instant::now();
+            let img = if *render {
+                golden::povray_version().map_err(Error::from)?;
+                let refs = golden::references(&job.scene, &job.tri).map_err(Error::from)?;
+                let r = refs
+                    .iter()
+                    .find(|r| r.variant == variant)
+                    .or_else(|| refs.first())
+                    .ok_or_else(|| Error::Usage("no POV-Ray reference for this scene".into()))?;
+                golden::render(&job.scene, r).map_err(Error::from)?
+            } else {
+                let _lock = golden::GoldenLock::shared(golden_dir).map_err(Error::from)?;
+                let path = golden::reference_path(golden_dir, &job.scene, variant);
+                if !path.exists() {
+                    return Err(Error::Usage(format!(
+                        "{}: no stored POV-Ray reference; render one with `rendiff golden --update {}` or pass --render",
+                        path.display(),
+                        job.scene.path.display()
+                    )));
+                }
+                let cam = &job.tri.camera;
+                image_io::read_png_linear_within(
+                    &path,
+                    Some((cam.width(), cam.height())),
+                    &job.budget,
+                )?
+            };
+            Output::Image {
+                width: img.width,
+                height: img.height,
+                pixels: img.pixels,
+                linear16: img.linear16,
+                rendered_ms: render.then(|| started.elapsed().as_secs_f64() * 1e3),
+            }
+        }
+        Side::Backend(b) => {
+            let r = job.render_with_depth(*b, max_depth)?;
+            let note = match r.work {
+                crate::Work::Painter { order: o, .. } => Some(format!(
+                    "painter ({} sort): {} triangles drawn; {} overlapping pairs ordered: {} by depth ranges, {} by planes, {} coplanar; {} undecided (interpenetrating or cyclic), {} cycles broken; its real mismatches are samples it ordered wrongly",
+                    job.settings.painter_sort,
+                    o.drawn,
+                    o.overlapping_pairs,
+                    o.by_depth_range,
+                    o.by_plane,
+                    o.coplanar,
+                    o.undecided,
+                    o.cycles_broken
+                )),
+                _ => None,
+            };
+            return Ok((Output::Frame(r.frame, r.time_ms), note));
+        }
+        Side::Image(p) => {
+            // The header's size is compared with the scene's before the
+            // image is decoded (a PNG may claim 60000×60000 in 3 MB).
+            let cam = &job.tri.camera;
+            let img = image_io::read_png_linear_within(
+                p,
+                Some((cam.width(), cam.height())),
+                &job.budget,
+            )?;
+            Output::Image {
+                width: img.width,
+                height: img.height,
+                pixels: img.pixels,
+                linear16: img.linear16,
+                rendered_ms: None,
+            }
+        }
+    };
+    Ok((out, None))
+}
+
+/// Renders (or reads) both sides and compares them.
+///
+/// # Errors
+///
+/// [`Error`] for a looser `[tolerance]`, an unreadable image or a size mismatch.
+pub fn diff(job: &Prepared, scene_label: &str, a: &Side, b: &Side) -> Result<DiffResult, Error> {
+    let (tol, image_tol) = tolerances(job)?;
+    let mut notes = Vec::new();
+    let mut max_depth = job.settings.max_depth;
+    // Sides that render (a backend, or POV-Ray's reference at either depth).
+    let renderers = [a, b]
+        .iter()
+        .filter(|s| matches!(s, Side::Backend(_) | Side::Pov { .. }))
+        .count();
+    if renderers == 2
+        && !(a.traces_ray_tree() && b.traces_ray_tree())
+        && max_depth > 1
+        && job.plan.ray_tree
+    {
+        let who = if a.traces_ray_tree() {
+            b.label()
+        } else {
+            a.label()
+        };
+        notes.push(format!(
+            "max_depth forced from {max_depth} to 1 on both sides: {who} shades locally and cannot trace the ray tree"
+        ));
+        max_depth = 1;
+    }
+    let (out_a, note_a) = produce(job, a, max_depth)?;
+    let (out_b, note_b) = produce(job, b, max_depth)?;
+    notes.extend(note_a);
+    notes.extend(note_b);
+    let cam = &job.tri.camera;
+    let mut tol = tol;
+    let (comparison, image_tol_used) = match (&out_a, &out_b) {
+        (Output::Frame(fa, _), Output::Frame(fb, _)) => (
+            compare::compare_frames(&job.tri, fa, fb, &tol, job.settings.depth),
+            None,
+        ),
+        _ => {
+            // Against a stored image the shading bound is that image's own
+            // rounding (the frames' bit-identity does not apply).
+            tol.shading_max = tol
+                .shading_max
+                .max(image_quantum(&out_a).max(image_quantum(&out_b)));
+            (
+                compare::compare_images(
+                    cam.width(),
+                    cam.height(),
+                    out_a.pixels(),
+                    out_b.pixels(),
+                    &image_tol,
+                    tol.shading_max,
+                ),
+                Some(image_tol),
+            )
+        }
+    };
+    let mut report = Report::new(
+        scene_label,
+        (cam.width(), cam.height()),
+        (&a.label(), &b.label()),
+        max_depth,
+        &comparison,
+        &tol,
+        image_tol_used.as_ref(),
+        Times {
+            a: out_a.time(),
+            b: out_b.time(),
+        },
+        notes,
+    );
+    // A frame against an image: explain the pixels beyond the bound.
+    if let (Some(frame), None) | (None, Some(frame)) = (out_a.frame(), out_b.frame()) {
+        let reference = if out_a.frame().is_some() {
+            out_b.pixels()
+        } else {
+            out_a.pixels()
+        };
+        let accel = crate::accel::Accel::new(&job.tri, crate::accel::AccelOptions::default());
+        let oracle = crate::compare::Oracle::new(&job.tri, job.settings.depth);
+        #[expect(
+            clippy::cast_possible_truncation,
+            clippy::cast_sign_loss,
+            reason = "an 8-bit bound"
+        )]
+        let max8 = image_tol.pov_max8.clamp(0.0, 255.0) as u8;
+        let (counts, _) = crate::compare::explain::explain(frame, reference, &accel, &oracle, max8);
+        report.explained = Some(counts);
+    }
+    Ok(DiffResult {
+        report,
+        comparison,
+        a: out_a,
+        b: out_b,
+        tolerance: tol,
+    })
+}
+
+/// Half a code of a stored image's encoding, in linear units (the largest
+/// over its range): a difference below it is the image's own rounding.
+/// 16-bit linear: 0.5/65535; 8-bit sRGB: half the widest step, at the top
+/// of the range (254 → 255). Frames are f32: 0.
+fn image_quantum(out: &Output) -> f64 {
+    match out {
+        Output::Frame(..) => 0.0,
+        Output::Image { linear16: true, .. } => 0.5 / 65535.0,
+        Output::Image { .. } => {
+            let lin = |c: f64| ((c / 255.0 + 0.055) / 1.055).powf(2.4);
+            0.5 * (1.0 - lin(254.0))
+        }
+    }
+}
+
+fn picture(out: &Output, w: u32, h: u32) -> Picture {
+    Picture::from_linear(w, h, out.pixels())
+}
+
+/// Writes a scene's pictures, `report.json` and `index.html` into `dir`.
+///
+/// # Errors
+///
+/// [`Error::Image`] on I/O failure.
+pub fn write_outputs(r: &DiffResult, dir: &Path, encoding: PngEncoding) -> Result<(), Error> {
+    std::fs::create_dir_all(dir).map_err(|source| {
+        Error::Image(image_io::ImageIoError::Io {
+            path: dir.to_path_buf(),
+            source,
+        })
+    })?;
+    let (w, h) = (r.report.width, r.report.height);
+    image_io::write_png(&dir.join("a.png"), w, h, r.a.pixels(), encoding)?;
+    image_io::write_png(&dir.join("b.png"), w, h, r.b.pixels(), encoding)?;
+    let heat = maps::heat_map(&r.comparison, w, h, r.report.tolerance.shading_max);
+    image_io::write_png_rgba8(&dir.join("heat.png"), w, h, &heat.rgba)?;
+    let mut panels: Vec<(String, Picture)> = vec![
+        (format!("A: {}", r.report.a), picture(&r.a, w, h)),
+        (format!("B: {}", r.report.b), picture(&r.b, w, h)),
+        ("SHADING ERROR".into(), heat),
+    ];
+    let mut images = vec![
+        ("a", "a.png"),
+        ("b", "b.png"),
+        ("shading error", "heat.png"),
+    ];
+    if r.comparison.visibility.is_some() {
+        let vis = maps::visibility_map(&r.comparison, w, h);
+        image_io::write_png_rgba8(&dir.join("visibility.png"), w, h, &vis.rgba)?;
+        panels.push(("VISIBILITY".into(), vis));
+        images.push(("visibility classes", "visibility.png"));
+    }
+    let refs: Vec<(&str, &Picture)> = panels.iter().map(|(l, p)| (l.as_str(), p)).collect();
+    if let Some(c) = maps::composite(&refs) {
+        image_io::write_png_rgba8(&dir.join("composite.png"), c.width, c.height, &c.rgba)?;
+        images.push(("side by side", "composite.png"));
+    }
+    let json = serde_json::to_string_pretty(&r.report).unwrap_or_default();
+    let write_text = |name: &str, text: &str| {
+        image_io::write_atomic(&dir.join(name), |f| {
+            std::io::Write::write_all(f, text.as_bytes())
+        })
+    };
+    write_text("report.json", &json)?;
+    write_text("index.html", &scene_html(&r.report, &images))?;
+    Ok(())
+}

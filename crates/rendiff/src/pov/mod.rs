@@ -1,0 +1,640 @@
+//! POV-Ray 3.7 export: a scene as POV-Ray SDL that renders the same picture
+//! (POVRAY.md §1–§9).
+//!
+//! Two geometries:
+//! * `mesh`: every object as the very triangles the backends see (`mesh2`
+//!   with per-corner normals and uvs), so a comparison tests visibility and
+//!   shading only;
+//! * `analytic`: spheres, boxes and superellipsoids as POV-Ray's own
+//!   primitives with an explicit `matrix`, so a comparison also measures
+//!   the tessellation error; polygons and meshes stay triangles.
+//!
+//! Every parameter is written explicitly (POVRAY.md §7b), floats in their
+//! shortest round-trip form (an `f32` is widened to `f64` exactly first),
+//! the camera as explicit vectors (no `look_at`, no `angle`). Image paths
+//! are written as in the scene file, relative to the scene's folder:
+//! POV-Ray must run from there (`rendiff golden` does).
+
+pub mod golden;
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+use crate::camera::Projection;
+use crate::color::Rgb;
+use crate::math::{DVec3, Vec3, to_f64};
+use crate::options::Geometry;
+use crate::scene::{Object, Scene, Shape};
+use crate::shade::{LightKind, Material, Pigment};
+use crate::tri_scene::{NO_INDEX, TriScene};
+
+/// What to export.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ExportOptions {
+    /// Triangles only, or POV-Ray primitives for the curved shapes and boxes.
+    pub geometry: Geometry,
+    /// POV-Ray's `max_trace_level`.
+    pub max_depth: u32,
+    /// Replace the numbers of large arrays by their count and a hash (for
+    /// snapshots of the export text).
+    pub abridged: bool,
+}
+
+/// An image the exported SDL reads.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ImageRef {
+    /// The name written in the SDL.
+    pub name: String,
+    /// The file it comes from.
+    pub source: PathBuf,
+    /// For an 8-bit greyscale PNG, which POV-Ray 3.7 misreads (POVRAY.md
+    /// §9.2): the RGB copy to write at `name` before rendering.
+    pub rgb_copy: bool,
+}
+
+impl ImageRef {
+    /// Writes the RGB copy of a greyscale image into `dir` (where `name`
+    /// resolves); nothing for other images.
+    ///
+    /// # Errors
+    ///
+    /// I/O or PNG errors.
+    pub fn materialise(&self, dir: &std::path::Path) -> Result<(), crate::image_io::ImageIoError> {
+        if !self.rgb_copy {
+            return Ok(());
+        }
+        let tex = crate::texture::Texture::load(&self.source).map_err(|e| {
+            crate::image_io::ImageIoError::Png {
+                path: self.source.clone(),
+                message: e.message,
+            }
+        })?;
+        let px: Vec<u8> = tex
+            .texels()
+            .iter()
+            .flat_map(|t| {
+                #[expect(
+                    clippy::cast_possible_truncation,
+                    clippy::cast_sign_loss,
+                    reason = "8-bit texels, exact"
+                )]
+                let v = (t[0] * 255.0).round() as u8;
+                [v, v, v, 255]
+            })
+            .collect();
+        crate::image_io::write_png_rgba8(&dir.join(&self.name), tex.width(), tex.height(), &px)
+    }
+}
+
+/// An exported scene.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Export {
+    /// The SDL text.
+    pub text: String,
+    /// The image files the SDL reads: names relative to the scene's folder
+    /// (RGB copies of greyscale images relative to the render folder).
+    pub images: Vec<ImageRef>,
+    /// The size POV-Ray must render: n·W × n·H for `samples = n`.
+    pub render_size: (u32, u32),
+    /// Samples per pixel side (the reference averages n×n blocks).
+    pub samples: u32,
+}
+
+/// A float in its shortest round-trip decimal form.
+fn num(v: f64) -> String {
+    if v == 0.0 {
+        return "0".into();
+    }
+    format!("{v}")
+}
+
+fn f(v: f32) -> String {
+    num(f64::from(v))
+}
+
+fn vec3(v: DVec3) -> String {
+    format!("<{},{},{}>", num(v.x), num(v.y), num(v.z))
+}
+
+fn vec3f(v: Vec3) -> String {
+    vec3(to_f64(v))
+}
+
+fn rgb(c: Rgb) -> String {
+    format!("<{},{},{}>", f(c.r), f(c.g), f(c.b))
+}
+
+/// FNV-1a (64 bit) of bytes: a stable, dependency-free content hash.
+#[must_use]
+pub fn fnv1a(bytes: &[u8]) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for b in bytes {
+        h ^= u64::from(*b);
+        h = h.wrapping_mul(0x0100_0000_01b3);
+    }
+    h
+}
+
+/// An SDL array: `name { count, item, item, … }`, or abridged to its count
+/// and hash.
+fn array(out: &mut String, name: &str, items: &[String], abridged: bool) {
+    if abridged {
+        let joined = items.join(",");
+        let _ = writeln!(
+            out,
+            "  {name} {{ {}, /* {} items, fnv1a {:016x} */ }}",
+            items.len(),
+            items.len(),
+            fnv1a(joined.as_bytes())
+        );
+        return;
+    }
+    let _ = write!(out, "  {name} {{ {}", items.len());
+    for (k, it) in items.iter().enumerate() {
+        out.push_str(if k % 4 == 0 { ",\n    " } else { ", " });
+        out.push_str(it);
+    }
+    out.push_str("\n  }\n");
+}
+
+/// Whether a scene object is written as a POV-Ray primitive.
+fn is_primitive(o: &Object, geometry: Geometry) -> bool {
+    geometry == Geometry::Analytic
+        && matches!(
+            o.shape,
+            Shape::Sphere { .. } | Shape::Box { .. } | Shape::Superellipsoid { .. }
+        )
+}
+
+/// Why a scene cannot be written as SDL: a file it reads has a name
+/// POV-Ray cannot open (see [`crate::escape::sdl_file_name`]).
+#[derive(Debug, thiserror::Error)]
+#[error("{}: `materials.{material}.{key}`: {message}", crate::escape::message(&.path.display().to_string()))]
+pub struct ExportError {
+    /// The scene file.
+    pub path: PathBuf,
+    /// The material.
+    pub material: String,
+    /// The key naming the file (`pigment.image`, `bump.image`).
+    pub key: &'static str,
+    /// What is wrong.
+    pub message: String,
+}
+
+/// Exports a scene (its `TriScene` must come from the same scene).
+///
+/// Every string from the scene reaches the SDL through
+/// [`crate::escape`]: file names as escaped literals, names and labels in
+/// comments with everything but printable ASCII replaced.
+///
+/// # Errors
+///
+/// [`ExportError`] for an image whose name POV-Ray cannot open.
+pub fn export(scene: &Scene, tri: &TriScene, opts: &ExportOptions) -> Result<Export, ExportError> {
+    let mut o = String::new();
+    let cam = &tri.camera;
+    let n = cam.samples();
+    let render_size = (cam.width() * n, cam.height() * n);
+    write_header(&mut o, scene, tri, opts, render_size);
+    write_camera(&mut o, cam);
+    write_lights(&mut o, tri);
+    let mut images: Vec<ImageRef> = Vec::new();
+    write_objects(&mut o, scene, tri, opts, &mut images)?;
+    Ok(Export {
+        text: o,
+        images,
+        render_size,
+        samples: n,
+    })
+}
+
+/// The `#version` line, the comment naming the scene and the POV-Ray
+/// command line, and the global settings and background.
+fn write_header(
+    o: &mut String,
+    scene: &Scene,
+    tri: &TriScene,
+    opts: &ExportOptions,
+    render_size: (u32, u32),
+) {
+    let n = tri.camera.samples();
+    let _ = writeln!(o, "#version 3.7;");
+    let _ = writeln!(
+        o,
+        "// Exported by rendiff from {}: render {}x{} from the scene's folder with",
+        crate::escape::sdl_comment(
+            &scene
+                .path
+                .file_name()
+                .map_or_else(String::new, |s| s.to_string_lossy().into_owned())
+        ),
+        render_size.0,
+        render_size.1
+    );
+    let _ = writeln!(
+        o,
+        "// {}",
+        golden::command_line("scene.pov", "out.png", render_size)
+    );
+    if n > 1 {
+        let _ = writeln!(
+            o,
+            "// and average {n}x{n} blocks (the n×n samples of each pixel, each clamped to [0, 1] first, as the PNG stores them)."
+        );
+    }
+    let _ = writeln!(
+        o,
+        "global_settings {{ assumed_gamma 1.0 ambient_light rgb {} max_trace_level {} adc_bailout 0 }}",
+        rgb(tri.ambient_light),
+        opts.max_depth
+    );
+    let _ = writeln!(o, "background {{ rgb {} }}", rgb(tri.background));
+}
+
+/// The camera (POVRAY.md §2, §9.6): explicit vectors, the right-handed
+/// basis as is.
+fn write_camera(o: &mut String, cam: &crate::camera::Camera) {
+    let (w, h) = (f64::from(cam.width()), f64::from(cam.height()));
+    match cam.projection() {
+        Projection::Perspective { tan_half_fov: t } => {
+            let _ = writeln!(
+                o,
+                "camera {{ perspective location {} direction {} right {} up {} }}",
+                vec3(cam.eye()),
+                vec3(cam.forward()),
+                vec3(cam.right() * (2.0 * t * w / h)),
+                vec3(cam.up() * (2.0 * t))
+            );
+        }
+        Projection::Orthographic { view_height } => {
+            let _ = writeln!(
+                o,
+                "camera {{ orthographic location {} direction {} right {} up {} }}",
+                vec3(cam.eye()),
+                vec3(cam.forward()),
+                vec3(cam.right() * (view_height * w / h)),
+                vec3(cam.up() * view_height)
+            );
+        }
+    }
+}
+
+/// The lights. A parallel light sits beyond the scene's bounding sphere,
+/// because POV-Ray stops its shadow rays at the plane through it (§9.7).
+fn write_lights(o: &mut String, tri: &TriScene) {
+    let (c, r) = tri.bounds.bounding_sphere();
+    let (c, r) = (to_f64(c), f64::from(r));
+    for l in &tri.lights {
+        let mut extra = String::new();
+        if l.shadowless {
+            extra.push_str(" shadowless");
+        }
+        if let Some((fd, fp)) = l.fade {
+            let _ = write!(extra, " fade_distance {} fade_power {}", f(fd), f(fp));
+        }
+        match l.kind {
+            LightKind::Point { position } => {
+                let _ = writeln!(
+                    o,
+                    "light_source {{ {} color rgb {}{extra} }}",
+                    vec3f(position),
+                    rgb(l.color)
+                );
+            }
+            LightKind::Parallel { direction } => {
+                let d = to_f64(direction).normalize();
+                let at = c - d * (r + 1.0);
+                let _ = writeln!(
+                    o,
+                    "light_source {{ {} color rgb {} parallel point_at {}{extra} }}",
+                    vec3(at),
+                    rgb(l.color),
+                    vec3(c)
+                );
+            }
+        }
+    }
+}
+
+/// Every object with its texture. The far plane clips what the camera
+/// sees (DESIGN.md §2), not what casts shadows or is reflected: an object
+/// it cuts is written twice, clipped for the camera only and whole for
+/// everything else.
+fn write_objects(
+    o: &mut String,
+    scene: &Scene,
+    tri: &TriScene,
+    opts: &ExportOptions,
+    images: &mut Vec<ImageRef>,
+) -> Result<(), ExportError> {
+    let cam = &tri.camera;
+    let (f_dir, eye) = (cam.forward(), cam.eye());
+    let far_plane = format!(
+        "clipped_by {{ plane {{ {}, {} }} }}",
+        vec3(f_dir),
+        num(cam.far() + f_dir.dot(eye))
+    );
+    for (k, obj) in scene.objects.iter().enumerate() {
+        let m = &tri.materials[usize::from(obj.material)];
+        let info = &tri.objects[k];
+        let mut body = String::new();
+        let uv = if is_primitive(obj, opts.geometry) {
+            write_primitive(&mut body, obj);
+            matches!(obj.shape, Shape::Sphere { .. })
+        } else {
+            write_mesh2(&mut body, tri, k, opts.abridged)
+        };
+        write_texture(&mut body, scene, m, uv, images)?;
+        if m.is_transparent() && m.ior != 1.0 {
+            let _ = writeln!(body, "  interior {{ ior {} }}", f(m.ior));
+        }
+        if obj.no_shadow {
+            let _ = writeln!(body, "  no_shadow");
+        }
+        let depths: Vec<f64> = info
+            .bounds
+            .corners()
+            .iter()
+            .map(|c| cam.view_depth(to_f64(*c)))
+            .collect();
+        let deepest = depths.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let nearest = depths.iter().copied().fold(f64::INFINITY, f64::min);
+        let label = crate::escape::sdl_comment(&info.label);
+        let _ = writeln!(o, "// {label}");
+        if deepest <= cam.far() {
+            let _ = writeln!(o, "{body}}}");
+            continue;
+        }
+        if nearest <= cam.far() {
+            let _ = writeln!(
+                o,
+                "{body}  {far_plane}\n  no_shadow no_reflection\n}}\n// {label} beyond the far plane: shadows and reflections only"
+            );
+        } else {
+            let _ = writeln!(
+                o,
+                "// (wholly beyond the far plane: shadows and reflections only)"
+            );
+        }
+        let _ = writeln!(o, "{body}  no_image\n}}");
+    }
+    Ok(())
+}
+
+fn write_primitive(o: &mut String, obj: &Object) {
+    let m = obj.transform.matrix();
+    let matrix = format!(
+        "matrix <{},{},{}, {},{},{}, {},{},{}, {},{},{}>",
+        num(m.x_axis.x),
+        num(m.x_axis.y),
+        num(m.x_axis.z),
+        num(m.y_axis.x),
+        num(m.y_axis.y),
+        num(m.y_axis.z),
+        num(m.z_axis.x),
+        num(m.z_axis.y),
+        num(m.z_axis.z),
+        num(m.w_axis.x),
+        num(m.w_axis.y),
+        num(m.w_axis.z)
+    );
+    match &obj.shape {
+        Shape::Sphere { center, radius } => {
+            let _ = writeln!(
+                o,
+                "sphere {{ {}, {}\n  {matrix}",
+                vec3(*center),
+                num(*radius)
+            );
+        }
+        Shape::Box { min, max } => {
+            let _ = writeln!(o, "box {{ {}, {}\n  {matrix}", vec3(*min), vec3(*max));
+        }
+        Shape::Superellipsoid { e, n } => {
+            let _ = writeln!(
+                o,
+                "superellipsoid {{ <{}, {}>\n  {matrix}",
+                num(*e),
+                num(*n)
+            );
+        }
+        Shape::Mesh { .. } | Shape::Polygon(_) => {}
+    }
+}
+
+/// Writes an object's triangles as `mesh2` (opening brace included);
+/// returns whether it has uvs.
+fn write_mesh2(o: &mut String, tri: &TriScene, object: usize, abridged: bool) -> bool {
+    let info = &tri.objects[object];
+    let range = info.tris.start as usize..info.tris.end as usize;
+    // Pools restricted to this object, in first-use order.
+    let mut vmap = std::collections::HashMap::new();
+    let mut verts = Vec::new();
+    let mut faces = Vec::new();
+    for t in range.clone() {
+        let idx = tri.tris[t].map(|v| {
+            let next = verts.len();
+            *vmap.entry(v).or_insert_with(|| {
+                verts.push(tri.positions[v as usize]);
+                next
+            })
+        });
+        faces.push(idx);
+    }
+    let smooth = range.clone().any(|t| tri.tri_normals[t][0] != NO_INDEX);
+    // uvs only where the material reads them (the same rule as the plan),
+    // so the export does not depend on whether the plan dropped them.
+    let has_uv = range.clone().all(|t| tri.tri_uvs[t][0] != NO_INDEX)
+        && !range.is_empty()
+        && tri.materials[usize::from(info.material)].needs_uv();
+    let _ = writeln!(o, "mesh2 {{");
+    array(
+        o,
+        "vertex_vectors",
+        &verts.iter().map(|v| vec3f(*v)).collect::<Vec<_>>(),
+        abridged,
+    );
+    let mut normals = Vec::new();
+    let mut nfaces = Vec::new();
+    if smooth {
+        let mut nmap = std::collections::HashMap::new();
+        for t in range.clone() {
+            let ni = tri.tri_normals[t];
+            let idx: [usize; 3] = if ni[0] == NO_INDEX {
+                // A flat triangle among smooth ones: its geometric normal at
+                // all three corners interpolates to itself.
+                let g = tri.geometric_normal(u32::try_from(t).unwrap_or(0));
+                normals.push(g);
+                [normals.len() - 1; 3]
+            } else {
+                ni.map(|n| {
+                    let next = normals.len();
+                    *nmap.entry(n).or_insert_with(|| {
+                        normals.push(tri.normals[n as usize]);
+                        next
+                    })
+                })
+            };
+            nfaces.push(idx);
+        }
+        array(
+            o,
+            "normal_vectors",
+            &normals.iter().map(|v| vec3f(*v)).collect::<Vec<_>>(),
+            abridged,
+        );
+    }
+    let mut uvs = Vec::new();
+    let mut ufaces = Vec::new();
+    if has_uv {
+        let mut umap = std::collections::HashMap::new();
+        for t in range.clone() {
+            ufaces.push(tri.tri_uvs[t].map(|u| {
+                let next = uvs.len();
+                *umap.entry(u).or_insert_with(|| {
+                    uvs.push(tri.uvs[u as usize]);
+                    next
+                })
+            }));
+        }
+        array(
+            o,
+            "uv_vectors",
+            &uvs.iter()
+                .map(|q| format!("<{},{}>", f(q.x), f(q.y)))
+                .collect::<Vec<_>>(),
+            abridged,
+        );
+    }
+    let tri3 = |t: &[usize; 3]| format!("<{},{},{}>", t[0], t[1], t[2]);
+    array(
+        o,
+        "face_indices",
+        &faces.iter().map(tri3).collect::<Vec<_>>(),
+        abridged,
+    );
+    if smooth {
+        array(
+            o,
+            "normal_indices",
+            &nfaces.iter().map(tri3).collect::<Vec<_>>(),
+            abridged,
+        );
+    }
+    if has_uv {
+        array(
+            o,
+            "uv_indices",
+            &ufaces.iter().map(tri3).collect::<Vec<_>>(),
+            abridged,
+        );
+    }
+    if info.closed {
+        // Makes the mesh a solid for the eye's inside test (POVRAY.md §9.9).
+        let _ = writeln!(o, "  inside_vector <0,0,1>");
+    }
+    has_uv
+}
+
+/// The path of an image as the scene file wrote it (relative to the
+/// scene's folder where possible). A backslash is kept: on Unix it is a
+/// character of the name, not a separator, and rewriting it would make
+/// POV-Ray open another file ([`crate::escape::sdl_file_name`] refuses it).
+fn image_name(scene: &Scene, path: &std::path::Path) -> String {
+    let base = scene.path.parent().unwrap_or(std::path::Path::new(""));
+    path.strip_prefix(base)
+        .unwrap_or(path)
+        .to_string_lossy()
+        .into_owned()
+}
+
+fn write_texture(
+    o: &mut String,
+    scene: &Scene,
+    m: &Material,
+    uv: bool,
+    images: &mut Vec<ImageRef>,
+) -> Result<(), ExportError> {
+    let mut note = |tex: &crate::texture::Texture, key: &'static str| {
+        let rgb_copy = tex.is_grey() && tex.bit_depth() == 8;
+        let name = if rgb_copy {
+            // Written by the renderer into its folder, found by +L.
+            let stem = tex
+                .path()
+                .file_stem()
+                .map_or_else(String::new, |s| s.to_string_lossy().into_owned());
+            format!("rendiff_rgb_{stem}.png")
+        } else {
+            image_name(scene, tex.path())
+        };
+        let literal = crate::escape::sdl_file_name(&name).map_err(|message| ExportError {
+            path: scene.path.clone(),
+            material: m.name.clone(),
+            key,
+            message,
+        })?;
+        if !images.iter().any(|i| i.name == name) {
+            images.push(ImageRef {
+                name,
+                source: tex.path().to_path_buf(),
+                rgb_copy,
+            });
+        }
+        Ok(literal)
+    };
+    if uv && (m.needs_uv()) {
+        let _ = writeln!(o, "  uv_mapping");
+    }
+    match &m.pigment {
+        Pigment::Color(c) => {
+            let _ = writeln!(
+                o,
+                "  pigment {{ rgbft <{},{},{},{},{}> }}",
+                f(c.r),
+                f(c.g),
+                f(c.b),
+                f(m.filter),
+                f(m.transmit)
+            );
+        }
+        Pigment::Image(tex) => {
+            let name = note(tex, "pigment.image")?;
+            let mut ft = String::new();
+            if !tex.has_alpha() && m.filter + m.transmit > 0.0 {
+                let _ = write!(
+                    ft,
+                    " filter all {} transmit all {}",
+                    f(m.filter),
+                    f(m.transmit)
+                );
+            }
+            let _ = writeln!(
+                o,
+                "  pigment {{ image_map {{ png {name} gamma 1.0 interpolate 2{ft} }} }}"
+            );
+        }
+    }
+    if let Some(b) = &m.bump {
+        let name = note(&b.texture, "bump.image")?;
+        let _ = writeln!(
+            o,
+            "  normal {{ bump_map {{ png {name} gamma 1.0 bump_size {} interpolate 2 }} }}",
+            f(b.size)
+        );
+    }
+    let _ = writeln!(
+        o,
+        "  finish {{ ambient {} emission {} diffuse {} brilliance {} phong {} phong_size {} specular {} roughness {} metallic {} reflection {{ {} }} }}",
+        f(m.ambient),
+        f(m.emission),
+        f(m.diffuse),
+        f(m.brilliance),
+        f(m.phong),
+        f(m.phong_size),
+        f(m.specular),
+        f(m.roughness),
+        f(m.metallic),
+        f(m.reflection)
+    );
+    Ok(())
+}
