@@ -90,152 +90,13 @@ impl Plan {
     /// The plan for a scene.
     #[must_use]
     pub fn for_scene(scene: &TriScene, bvh_mode: BvhMode, max_depth: u32) -> Plan {
-        let mut decisions = Vec::new();
-
-        // Shadow rays: only lights that are not shadowless cast them, and
-        // only objects without no_shadow can block them.
-        let shadow_lights = scene.lights.iter().filter(|l| !l.shadowless).count();
-        let casters = scene.objects.iter().filter(|o| !o.no_shadow).count();
-        let shadows = shadow_lights > 0 && casters > 0;
-        decisions.push(Decision {
-            what: "shadow rays",
-            on: shadows,
-            why: if shadow_lights == 0 {
-                "no light casts shadows (all shadowless, or none)".into()
-            } else if casters == 0 {
-                "every object has no_shadow".into()
-            } else {
-                format!("{shadow_lights} shadow-casting light(s), {casters} casting object(s)")
-            },
-        });
-
-        // The ray tree: needed only where a visible material reflects or transmits.
-        let spawning: Vec<&str> = scene
-            .materials
-            .iter()
-            .enumerate()
-            .filter(|(i, m)| {
-                m.spawns_rays() && scene.objects.iter().any(|o| usize::from(o.material) == *i)
-            })
-            .map(|(_, m)| m.name.as_str())
-            .collect();
-        let ray_tree = !spawning.is_empty() && max_depth > 1;
-        decisions.push(Decision {
-            what: "ray tree",
-            on: ray_tree,
-            why: if max_depth <= 1 {
-                "max_depth = 1".into()
-            } else if spawning.is_empty() {
-                "no material reflects or transmits".into()
-            } else {
-                format!("reflecting/transmitting: {}", spawning.join(", "))
-            },
-        });
-
-        // uv and texture work: only materials with an image pigment or a
-        // bump map read uvs; the other triangles drop theirs (`apply`).
-        let uv: Vec<bool> = scene.materials.iter().map(|m| m.needs_uv()).collect();
-        let with_uv = scene
-            .tri_uvs
-            .iter()
-            .zip(&scene.tri_material)
-            .filter(|(t, _)| t[0] != NO_INDEX)
-            .count();
-        let kept = scene
-            .tri_uvs
-            .iter()
-            .zip(&scene.tri_material)
-            .filter(|(t, m)| t[0] != NO_INDEX && uv[usize::from(**m)])
-            .count();
-        let textured: Vec<&str> = scene
-            .materials
-            .iter()
-            .zip(&uv)
-            .filter(|(_, u)| **u)
-            .map(|(m, _)| m.name.as_str())
-            .collect();
-        decisions.push(Decision {
-            what: "uv and textures",
-            on: !textured.is_empty(),
-            why: if textured.is_empty() {
-                format!("no material has an image pigment or a bump map; uvs of {with_uv} triangle(s) dropped")
-            } else {
-                format!(
-                    "textured: {}; uvs kept on {kept} of {with_uv} triangle(s)",
-                    textured.join(", ")
-                )
-            },
-        });
-
-        // Smooth normals: interpolated only on triangles that carry corner
-        // normals (smooth = true meshes and curved shapes); smooth = false
-        // meshes were tessellated without them.
-        let smooth = scene
-            .tri_normals
-            .iter()
-            .filter(|t| t[0] != NO_INDEX)
-            .count();
-        let flat_meshes = scene.objects.iter().filter(|o| !o.smooth).count();
-        decisions.push(Decision {
-            what: "smooth normals",
-            on: smooth > 0,
-            why: format!(
-                "interpolated on {smooth} of {} triangle(s); {flat_meshes} object(s) flat",
-                scene.len()
-            ),
-        });
-
-        let bvh = match bvh_mode {
-            BvhMode::On => true,
-            BvhMode::Off => false,
-            BvhMode::Auto => scene.len() > FLAT_LOOP_MAX_TRIANGLES,
-        };
-        decisions.push(Decision {
-            what: "BVH",
-            on: bvh,
-            why: match bvh_mode {
-                BvhMode::On => "bvh = \"on\"".into(),
-                BvhMode::Off => "bvh = \"off\"".into(),
-                BvhMode::Auto => format!(
-                    "{} triangles ({} a flat loop is faster up to {FLAT_LOOP_MAX_TRIANGLES})",
-                    scene.len(),
-                    if bvh { "above" } else { "at or below" }
-                ),
-            },
-        });
-
-        let frustum_cull = scene
-            .objects
-            .iter()
-            .map(|o| outside_frustum(scene, o.bounds))
-            .collect::<Vec<_>>();
-        let culled = frustum_cull.iter().filter(|c| **c).count();
-        decisions.push(Decision {
-            what: "frustum culling",
-            on: culled > 0,
-            why: format!(
-                "{culled} of {} object(s) entirely outside the view (primary visibility only)",
-                scene.objects.len()
-            ),
-        });
-        let backface_cull: Vec<bool> = scene
-            .objects
-            .iter()
-            .map(|o| {
-                let m = &scene.materials[usize::from(o.material)];
-                o.closed && !m.is_transparent() && !near_rect_touches(scene, o.bounds)
-            })
-            .collect();
-        let bf = backface_cull.iter().filter(|c| **c).count();
-        decisions.push(Decision {
-            what: "back-face culling",
-            on: bf > 0,
-            why: format!(
-                "{bf} of {} object(s) closed, opaque and seen from outside (raster primary visibility)",
-                scene.objects.len()
-            ),
-        });
-
+        let (shadows, shadow_decision) = decide_shadows(scene);
+        let (ray_tree, ray_tree_decision) = decide_ray_tree(scene, max_depth);
+        let (uv, uv_decision) = decide_uv(scene);
+        let smooth_decision = decide_smooth_normals(scene);
+        let (bvh, bvh_decision) = decide_bvh(scene, bvh_mode);
+        let (frustum_cull, frustum_decision) = decide_frustum_cull(scene);
+        let (backface_cull, backface_decision) = decide_backface_cull(scene);
         Plan {
             shadows,
             ray_tree,
@@ -243,7 +104,15 @@ impl Plan {
             frustum_cull,
             backface_cull,
             uv,
-            decisions,
+            decisions: vec![
+                shadow_decision,
+                ray_tree_decision,
+                uv_decision,
+                smooth_decision,
+                bvh_decision,
+                frustum_decision,
+                backface_decision,
+            ],
         }
     }
 
@@ -275,6 +144,182 @@ impl Plan {
         }
         dropped
     }
+}
+
+/// Shadow rays: only lights that are not shadowless cast them, and only
+/// objects without `no_shadow` can block them.
+fn decide_shadows(scene: &TriScene) -> (bool, Decision) {
+    let shadow_lights = scene.lights.iter().filter(|l| !l.shadowless).count();
+    let casters = scene.objects.iter().filter(|o| !o.no_shadow).count();
+    let shadows = shadow_lights > 0 && casters > 0;
+    let decision = Decision {
+        what: "shadow rays",
+        on: shadows,
+        why: if shadow_lights == 0 {
+            "no light casts shadows (all shadowless, or none)".into()
+        } else if casters == 0 {
+            "every object has no_shadow".into()
+        } else {
+            format!("{shadow_lights} shadow-casting light(s), {casters} casting object(s)")
+        },
+    };
+    (shadows, decision)
+}
+
+/// The ray tree: needed only where a visible material reflects or
+/// transmits, and only when `max_depth` allows a second bounce.
+fn decide_ray_tree(scene: &TriScene, max_depth: u32) -> (bool, Decision) {
+    let spawning: Vec<&str> = scene
+        .materials
+        .iter()
+        .enumerate()
+        .filter(|(i, m)| {
+            m.spawns_rays() && scene.objects.iter().any(|o| usize::from(o.material) == *i)
+        })
+        .map(|(_, m)| m.name.as_str())
+        .collect();
+    let ray_tree = !spawning.is_empty() && max_depth > 1;
+    let decision = Decision {
+        what: "ray tree",
+        on: ray_tree,
+        why: if max_depth <= 1 {
+            "max_depth = 1".into()
+        } else if spawning.is_empty() {
+            "no material reflects or transmits".into()
+        } else {
+            format!("reflecting/transmitting: {}", spawning.join(", "))
+        },
+    };
+    (ray_tree, decision)
+}
+
+/// uv and texture work: only materials with an image pigment or a bump map
+/// read uvs; the other triangles drop theirs (`apply`). Returns the
+/// per-material flags.
+fn decide_uv(scene: &TriScene) -> (Vec<bool>, Decision) {
+    let uv: Vec<bool> = scene.materials.iter().map(|m| m.needs_uv()).collect();
+    let with_uv = scene
+        .tri_uvs
+        .iter()
+        .zip(&scene.tri_material)
+        .filter(|(t, _)| t[0] != NO_INDEX)
+        .count();
+    let kept = scene
+        .tri_uvs
+        .iter()
+        .zip(&scene.tri_material)
+        .filter(|(t, m)| t[0] != NO_INDEX && uv[usize::from(**m)])
+        .count();
+    let textured: Vec<&str> = scene
+        .materials
+        .iter()
+        .zip(&uv)
+        .filter(|(_, u)| **u)
+        .map(|(m, _)| m.name.as_str())
+        .collect();
+    let decision = Decision {
+        what: "uv and textures",
+        on: !textured.is_empty(),
+        why: if textured.is_empty() {
+            format!(
+                "no material has an image pigment or a bump map; uvs of {with_uv} triangle(s) dropped"
+            )
+        } else {
+            format!(
+                "textured: {}; uvs kept on {kept} of {with_uv} triangle(s)",
+                textured.join(", ")
+            )
+        },
+    };
+    (uv, decision)
+}
+
+/// Smooth normals: interpolated only on triangles that carry corner normals
+/// (smooth = true meshes and curved shapes); smooth = false meshes were
+/// tessellated without them. Reported only; nothing is switched.
+fn decide_smooth_normals(scene: &TriScene) -> Decision {
+    let smooth = scene
+        .tri_normals
+        .iter()
+        .filter(|t| t[0] != NO_INDEX)
+        .count();
+    let flat_meshes = scene.objects.iter().filter(|o| !o.smooth).count();
+    Decision {
+        what: "smooth normals",
+        on: smooth > 0,
+        why: format!(
+            "interpolated on {smooth} of {} triangle(s); {flat_meshes} object(s) flat",
+            scene.len()
+        ),
+    }
+}
+
+/// BVH or flat loop: as `bvh` says, or with `auto` a BVH only above
+/// [`FLAT_LOOP_MAX_TRIANGLES`] triangles.
+fn decide_bvh(scene: &TriScene, bvh_mode: BvhMode) -> (bool, Decision) {
+    let bvh = match bvh_mode {
+        BvhMode::On => true,
+        BvhMode::Off => false,
+        BvhMode::Auto => scene.len() > FLAT_LOOP_MAX_TRIANGLES,
+    };
+    let decision = Decision {
+        what: "BVH",
+        on: bvh,
+        why: match bvh_mode {
+            BvhMode::On => "bvh = \"on\"".into(),
+            BvhMode::Off => "bvh = \"off\"".into(),
+            BvhMode::Auto => format!(
+                "{} triangles ({} a flat loop is faster up to {FLAT_LOOP_MAX_TRIANGLES})",
+                scene.len(),
+                if bvh { "above" } else { "at or below" }
+            ),
+        },
+    };
+    (bvh, decision)
+}
+
+/// Frustum culling: per object, whether it lies entirely outside the view
+/// (primary visibility only).
+fn decide_frustum_cull(scene: &TriScene) -> (Vec<bool>, Decision) {
+    let frustum_cull = scene
+        .objects
+        .iter()
+        .map(|o| outside_frustum(scene, o.bounds))
+        .collect::<Vec<_>>();
+    let culled = frustum_cull.iter().filter(|c| **c).count();
+    let decision = Decision {
+        what: "frustum culling",
+        on: culled > 0,
+        why: format!(
+            "{culled} of {} object(s) entirely outside the view (primary visibility only)",
+            scene.objects.len()
+        ),
+    };
+    (frustum_cull, decision)
+}
+
+/// Back-face culling: per object, whether it is closed, opaque and seen
+/// only from outside (the near rectangle does not touch it), so the
+/// rasterizer's primary visibility may drop its back faces.
+fn decide_backface_cull(scene: &TriScene) -> (Vec<bool>, Decision) {
+    let backface_cull: Vec<bool> = scene
+        .objects
+        .iter()
+        .map(|o| {
+            let m = &scene.materials[usize::from(o.material)];
+            o.closed && !m.is_transparent() && !near_rect_touches(scene, o.bounds)
+        })
+        .collect();
+    let bf = backface_cull.iter().filter(|c| **c).count();
+    let decision = Decision {
+        what: "back-face culling",
+        on: bf > 0,
+        why: format!(
+            "{bf} of {} object(s) closed, opaque and seen from outside (raster primary visibility)",
+            scene.objects.len()
+        ),
+    };
+    (backface_cull, decision)
 }
 
 /// `true` when a box lies entirely outside one plane of the view frustum

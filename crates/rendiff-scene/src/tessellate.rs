@@ -1069,14 +1069,15 @@ pub fn is_closed(tris: &[[u32; 3]]) -> bool {
     })
 }
 
-fn append(
+/// Transforms a piece's positions to world space and welds exactly equal
+/// ones, returning the welded positions and the triangles re-indexed into
+/// them. Fails if a vertex lands outside the allowed coordinate range.
+fn weld_positions(
     scene: &Scene,
     obj: &Object,
-    mut piece: Piece,
-    out: &mut TriScene,
-) -> Result<(), LoadError> {
+    piece: &Piece,
+) -> Result<(Vec<Vec3>, Vec<[u32; 3]>), LoadError> {
     let tr = &obj.transform;
-    // Transform positions and weld equal ones.
     let mut weld: HashMap<[u32; 3], u32> = HashMap::with_capacity(piece.positions.len());
     let mut welded: Vec<Vec3> = Vec::with_capacity(piece.positions.len());
     let mut remap: Vec<u32> = Vec::with_capacity(piece.positions.len());
@@ -1100,35 +1101,44 @@ fn append(
         });
         remap.push(id);
     }
-    let mut tris: Vec<[u32; 3]> = piece
+    let tris: Vec<[u32; 3]> = piece
         .tris
         .iter()
         .map(|t| t.map(|i| remap[i as usize]))
         .collect();
-    let closed = is_closed(&tris);
+    Ok((welded, tris))
+}
 
-    // Closed objects face out: reverse the winding if the signed volume is negative.
-    if closed {
-        let volume: f64 = tris
-            .iter()
-            .map(|t| {
-                let [a, b, c] = t.map(|i| to_f64(welded[i as usize]));
-                a.dot(b.cross(c))
-            })
-            .sum();
-        if volume < 0.0 {
-            for ((t, n), uv) in tris
-                .iter_mut()
-                .zip(&mut piece.tri_normals)
-                .zip(&mut piece.tri_uvs)
-            {
-                t.swap(1, 2);
-                n.swap(1, 2);
-                uv.swap(1, 2);
-            }
+/// Makes a closed mesh face out: reverses the winding of every triangle
+/// (with its normal and uv corners) if the signed volume is negative.
+fn orient_outward(welded: &[Vec3], tris: &mut [[u32; 3]], piece: &mut Piece) {
+    let volume: f64 = tris
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|i| to_f64(welded[i as usize]));
+            a.dot(b.cross(c))
+        })
+        .sum();
+    if volume < 0.0 {
+        for ((t, n), uv) in tris
+            .iter_mut()
+            .zip(&mut piece.tri_normals)
+            .zip(&mut piece.tri_uvs)
+        {
+            t.swap(1, 2);
+            n.swap(1, 2);
+            uv.swap(1, 2);
         }
     }
+}
 
+/// Rejects a refracting material on an object that is not closed, since
+/// refraction needs an inside.
+fn check_refraction_needs_closed(
+    scene: &Scene,
+    obj: &Object,
+    closed: bool,
+) -> Result<(), LoadError> {
     let material = &scene.materials[usize::from(obj.material)];
     if material.ior != 1.0 && material.is_transparent() && !closed {
         return Err(LoadError::Key {
@@ -1142,9 +1152,33 @@ fn append(
             ),
         });
     }
+    Ok(())
+}
 
-    // Normals: transformed by the inverse transpose; computed ones are
-    // area-weighted over welded positions in world space.
+/// Where a piece's indices start in the scene's shared arrays.
+struct Bases {
+    /// First of the piece's welded positions.
+    pos: u32,
+    /// First of the piece's uvs.
+    uv: u32,
+    /// First of the piece's given (transformed) normals.
+    normal: u32,
+    /// First of the piece's computed per-position normals (0 if none).
+    computed: u32,
+}
+
+/// Appends a smooth piece's normals to `out`: the given ones transformed
+/// by the inverse transpose, then, if any corner asks for one, normals
+/// computed area-weighted over the welded world-space positions. Returns
+/// the bases of the given and the computed normals.
+fn push_normals(
+    obj: &Object,
+    piece: &Piece,
+    welded: &[Vec3],
+    tris: &[[u32; 3]],
+    out: &mut TriScene,
+) -> (u32, u32) {
+    let tr = &obj.transform;
     let normal_base = u32::try_from(out.normals.len()).unwrap_or(u32::MAX);
     let needs_computed = piece.tri_normals.iter().any(|t| t[0] == COMPUTE_NORMAL);
     let mut computed_base = 0u32;
@@ -1156,7 +1190,7 @@ fn append(
         if needs_computed {
             computed_base = u32::try_from(out.normals.len()).unwrap_or(u32::MAX);
             let mut acc = vec![DVec3::ZERO; welded.len()];
-            for t in &tris {
+            for t in tris {
                 let [a, b, c] = t.map(|i| to_f64(welded[i as usize]));
                 let w = (b - a).cross(c - a);
                 for &i in t {
@@ -1167,47 +1201,64 @@ fn append(
                 .extend(acc.iter().map(|n| to_f32(n.normalize_or_zero())));
         }
     }
-    let pos_base = u32::try_from(out.positions.len()).unwrap_or(u32::MAX);
-    let uv_base = u32::try_from(out.uvs.len()).unwrap_or(u32::MAX);
-    out.positions.extend_from_slice(&welded);
-    out.uvs.extend_from_slice(&piece.uvs);
-    let object_id = u32::try_from(out.objects.len()).unwrap_or(u32::MAX);
-    let first = u32::try_from(out.tris.len()).unwrap_or(u32::MAX);
+    (normal_base, computed_base)
+}
+
+/// The scene-wide normal indices of triangle `t`'s corners, given its
+/// piece-local normal indices `tn`: none for flat pieces or corners without
+/// normals, otherwise each corner's given or computed normal.
+fn tri_normal_indices(tn: [u32; 3], t: [u32; 3], smooth: bool, bases: &Bases) -> [u32; 3] {
+    if tn[0] == NO_INDEX || !smooth {
+        [NO_INDEX; 3]
+    } else {
+        let mut r = [0u32; 3];
+        for c in 0..3 {
+            r[c] = if tn[c] == COMPUTE_NORMAL {
+                bases.computed + t[c]
+            } else {
+                bases.normal + tn[c]
+            };
+        }
+        r
+    }
+}
+
+/// Appends the piece's triangles with their normal and uv indices,
+/// material and object id to `out`, returning the triangles' bounds.
+fn push_triangles(
+    obj: &Object,
+    piece: &Piece,
+    welded: &[Vec3],
+    tris: &[[u32; 3]],
+    bases: &Bases,
+    object_id: u32,
+    out: &mut TriScene,
+) -> Aabb {
     let mut bounds = Aabb::EMPTY;
     for (k, t) in tris.iter().enumerate() {
-        out.tris.push(t.map(|i| i + pos_base));
+        out.tris.push(t.map(|i| i + bases.pos));
         for &i in t {
             bounds = bounds.grow(welded[i as usize]);
         }
-        let tn = piece.tri_normals[k];
-        let tn = if tn[0] == NO_INDEX || !piece.smooth {
-            [NO_INDEX; 3]
-        } else {
-            let mut r = [0u32; 3];
-            for c in 0..3 {
-                r[c] = if tn[c] == COMPUTE_NORMAL {
-                    computed_base + t[c]
-                } else {
-                    normal_base + tn[c]
-                };
-            }
-            r
-        };
+        let tn = tri_normal_indices(piece.tri_normals[k], *t, piece.smooth, bases);
         out.tri_normals.push(tn);
         let tu = piece.tri_uvs[k];
         out.tri_uvs.push(if tu[0] == NO_INDEX {
             tu
         } else {
-            tu.map(|i| i + uv_base)
+            tu.map(|i| i + bases.uv)
         });
         out.tri_material.push(obj.material);
         out.tri_object.push(object_id);
     }
-    let last = u32::try_from(out.tris.len()).unwrap_or(u32::MAX);
-    out.bounds = out.bounds.union(bounds);
-    // The analytic version of curved shapes and boxes (`--geometry
-    // analytic`). Boxes and superellipsoids whose material reads uvs keep
-    // their triangles: their uv maps are those of the tessellation.
+    bounds
+}
+
+/// Appends the analytic version of curved shapes and boxes (`--geometry
+/// analytic`) to `out`. Boxes and superellipsoids whose material reads uvs
+/// keep their triangles: their uv maps are those of the tessellation.
+fn push_analytic(scene: &Scene, obj: &Object, object_id: u32, out: &mut TriScene) {
+    let tr = &obj.transform;
     let needs_uv = scene.materials[usize::from(obj.material)].needs_uv();
     let kind = match obj.shape {
         Shape::Sphere { center, radius } => Some(AnalyticKind::Sphere { center, radius }),
@@ -1232,6 +1283,39 @@ fn append(
             uv: matches!(kind, AnalyticKind::Sphere { .. }),
         });
     }
+}
+
+/// Adds one object's piece to `out`: welds and orients its mesh in world
+/// space, checks its material, and appends its normals, positions, uvs,
+/// triangles, analytic shape and object record.
+fn append(
+    scene: &Scene,
+    obj: &Object,
+    mut piece: Piece,
+    out: &mut TriScene,
+) -> Result<(), LoadError> {
+    let (welded, mut tris) = weld_positions(scene, obj, &piece)?;
+    let closed = is_closed(&tris);
+    if closed {
+        orient_outward(&welded, &mut tris, &mut piece);
+    }
+    check_refraction_needs_closed(scene, obj, closed)?;
+
+    let (normal_base, computed_base) = push_normals(obj, &piece, &welded, &tris, out);
+    let bases = Bases {
+        pos: u32::try_from(out.positions.len()).unwrap_or(u32::MAX),
+        uv: u32::try_from(out.uvs.len()).unwrap_or(u32::MAX),
+        normal: normal_base,
+        computed: computed_base,
+    };
+    out.positions.extend_from_slice(&welded);
+    out.uvs.extend_from_slice(&piece.uvs);
+    let object_id = u32::try_from(out.objects.len()).unwrap_or(u32::MAX);
+    let first = u32::try_from(out.tris.len()).unwrap_or(u32::MAX);
+    let bounds = push_triangles(obj, &piece, &welded, &tris, &bases, object_id, out);
+    let last = u32::try_from(out.tris.len()).unwrap_or(u32::MAX);
+    out.bounds = out.bounds.union(bounds);
+    push_analytic(scene, obj, object_id, out);
     out.objects.push(ObjectInfo {
         label: obj.label(),
         kind: obj.shape.kind(),
