@@ -36,29 +36,56 @@ pub fn scene_text(dir: &Path, data: &[u8]) {
     let Ok(scene) = Scene::from_str(&dir.join("fuzz.toml"), text) else {
         return;
     };
-    let ov = Overrides {
+    let Ok(job) = Prepared::from_scene(scene, &small()) else {
+        return;
+    };
+    render_and_export(
+        &job,
+        &[Backend::Raster, Backend::Ray, Backend::Painter],
+        crate::options::Geometry::Analytic,
+        "scene",
+    );
+}
+
+/// What the scene entry points render with: 16×12, one sample per pixel,
+/// a 64 MiB memory budget.
+fn small() -> Overrides {
+    Overrides {
         size: Some((16, 12)),
         samples: Some(1),
         memory_budget: Some(64 << 20),
         ..Overrides::default()
-    };
-    let Ok(job) = Prepared::from_scene(scene, &ov) else {
-        return;
-    };
-    for backend in [Backend::Raster, Backend::Ray, Backend::Painter] {
-        // Within the fuzz budget a render may be refused; never a panic.
+    }
+}
+
+/// Renders `job` with each of `backends` (within the fuzz budget a render
+/// may be refused; never a panic or a non-finite pixel) and exports it to
+/// SDL, which must pass [`check_sdl`]; returns the ray tracer's frame when
+/// it rendered.
+fn render_and_export(
+    job: &Prepared,
+    backends: &[Backend],
+    geometry: crate::options::Geometry,
+    what: &str,
+) -> Option<Frame> {
+    let mut ray = None;
+    for &backend in backends {
         if let Ok(r) = job.render(backend) {
-            assert_finite(&r.frame, "scene");
+            assert_finite(&r.frame, what);
+            if backend == Backend::Ray {
+                ray = Some(r.frame);
+            }
         }
     }
     let opts = crate::pov::ExportOptions {
-        geometry: crate::options::Geometry::Analytic,
+        geometry,
         max_depth: 5,
         abridged: false,
     };
     if let Ok(export) = crate::pov::export(&job.scene, &job.tri, &opts) {
         check_sdl(&export.text);
     }
+    ray
 }
 
 /// A scene with the files it refers to, across the file system: `data`
@@ -95,35 +122,20 @@ pub fn scene_files(data: &[u8]) {
     if std::os::unix::fs::symlink(d.join("t.png"), d.join("l.png")).is_err() {
         return;
     }
-    let ov = Overrides {
-        size: Some((16, 12)),
-        samples: Some(1),
-        memory_budget: Some(64 << 20),
-        ..Overrides::default()
-    };
     let mut expected = vec!["l.png", "m.obj", "s.toml", "t.png"];
-    if let Ok(job) = Prepared::load(&d.join("s.toml"), &ov) {
-        for backend in [Backend::Raster, Backend::Ray] {
-            if let Ok(r) = job.render(backend) {
-                assert_finite(&r.frame, "scene files");
-            }
-        }
-        let opts = crate::pov::ExportOptions {
-            geometry: crate::options::Geometry::Mesh,
-            max_depth: 5,
-            abridged: false,
-        };
-        if let Ok(export) = crate::pov::export(&job.scene, &job.tri, &opts) {
-            check_sdl(&export.text);
-        }
-        if let Ok(r) = job.render(Backend::Ray) {
-            // The output's own name, and no other.
-            if r.frame
-                .write_png(&d.join("o.png"), crate::image_io::PngEncoding::Srgb8)
+    if let Ok(job) = Prepared::load(&d.join("s.toml"), &small()) {
+        let ray = render_and_export(
+            &job,
+            &[Backend::Raster, Backend::Ray],
+            crate::options::Geometry::Mesh,
+            "scene files",
+        );
+        // The output's own name, and no other.
+        if ray.is_some_and(|f| {
+            f.write_png(&d.join("o.png"), crate::image_io::PngEncoding::Srgb8)
                 .is_ok()
-            {
-                expected.push("o.png");
-            }
+        }) {
+            expected.push("o.png");
         }
     }
     let mut found: Vec<String> = std::fs::read_dir(d)

@@ -1761,21 +1761,11 @@ impl Loader<'_> {
         let Some(t) = root.table("raster")? else {
             return Ok(r);
         };
-        if let Some(s) = t.string("depth")? {
-            r.depth = s
-                .value
-                .parse()
-                .map_err(|e: rendiff_core::options::ParseOptionError| {
-                    t.err(&s.span, "depth", e.message)
-                })?;
+        if let Some(v) = t.option("depth")? {
+            r.depth = v;
         }
-        if let Some(s) = t.string("shadows")? {
-            r.shadows = s
-                .value
-                .parse()
-                .map_err(|e: rendiff_core::options::ParseOptionError| {
-                    t.err(&s.span, "shadows", e.message)
-                })?;
+        if let Some(v) = t.option("shadows")? {
+            r.shadows = v;
         }
         t.finish()?;
         Ok(r)
@@ -1786,21 +1776,11 @@ impl Loader<'_> {
         let Some(t) = root.table("ray")? else {
             return Ok(r);
         };
-        if let Some(s) = t.string("bvh")? {
-            r.bvh = s
-                .value
-                .parse()
-                .map_err(|e: rendiff_core::options::ParseOptionError| {
-                    t.err(&s.span, "bvh", e.message)
-                })?;
+        if let Some(v) = t.option("bvh")? {
+            r.bvh = v;
         }
-        if let Some(s) = t.string("geometry")? {
-            r.geometry =
-                s.value
-                    .parse()
-                    .map_err(|e: rendiff_core::options::ParseOptionError| {
-                        t.err(&s.span, "geometry", e.message)
-                    })?;
+        if let Some(v) = t.option("geometry")? {
+            r.geometry = v;
         }
         t.finish()?;
         Ok(r)

@@ -254,6 +254,21 @@ impl<'s, 'i> Table<'s, 'i> {
         }
     }
 
+    /// An option string (`depth = "u24"`) parsed by its `FromStr`, the
+    /// parse error reported at the value with the key named.
+    pub fn option<T>(&self, key: &'static str) -> Result<Option<T>, LoadError>
+    where
+        T: std::str::FromStr<Err = rendiff_core::options::ParseOptionError>,
+    {
+        let Some(s) = self.string(key)? else {
+            return Ok(None);
+        };
+        s.value
+            .parse()
+            .map(Some)
+            .map_err(|e: rendiff_core::options::ParseOptionError| self.err(&s.span, key, e.message))
+    }
+
     pub fn string(&self, key: &'static str) -> Result<Option<At<String>>, LoadError> {
         let Some(v) = self.raw(key) else {
             return Ok(None);

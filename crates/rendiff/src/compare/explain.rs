@@ -108,8 +108,9 @@ pub(crate) fn explain_pixel(
                 return Explanation::NearPlane;
             }
             if id != BACKGROUND {
-                let is_triangle = matches!(scene.prim(id), Prim::Triangle(_));
-                let material_id = match scene.prim(id) {
+                let prim = scene.prim(id);
+                let is_triangle = matches!(prim, Prim::Triangle(_));
+                let material_id = match prim {
                     Prim::Triangle(t) => scene.tri_material.get(t as usize).copied(),
                     Prim::Analytic(k) => scene.analytic.get(k).map(|s| s.material),
                 };
