@@ -4,6 +4,13 @@
 //! full frames, on one thread and on all threads; and loading and
 //! tessellating the largest bundled meshes. See benches/README.md.
 
+#![allow(
+    clippy::cast_possible_truncation,
+    clippy::cast_precision_loss,
+    clippy::cast_sign_loss,
+    clippy::cast_possible_wrap,
+    reason = "test and bench fixtures: small generated counts, indices and rates, where a wrong cast fails the check instead of reaching a user"
+)]
 use std::path::Path;
 use std::sync::OnceLock;
 

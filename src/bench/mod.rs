@@ -233,6 +233,10 @@ pub struct ImageError {
 
 /// Measures `image` against `reference` in 8-bit sRGB.
 #[must_use]
+#[expect(
+    clippy::cast_precision_loss,
+    reason = "statistics over counts and sizes below 2^53, exact in f64"
+)]
 pub fn image_error(image: &[Rgb], reference: &[Rgb]) -> ImageError {
     let mut sum = 0u64;
     let mut beyond = 0usize;

@@ -1,6 +1,11 @@
 //! The plots of `rendiff bench`, as SVG (plotters' SVG backend: no fonts
 //! needed, the viewer draws the text).
 
+#![expect(
+    clippy::cast_precision_loss,
+    reason = "statistics over counts and sizes below 2^53, exact in f64"
+)]
+
 use plotters::coord::ranged1d::SegmentValue;
 use plotters::prelude::*;
 
@@ -25,6 +30,10 @@ fn sig3(v: f64) -> String {
     if v == 0.0 || !v.is_finite() {
         return format!("{v}");
     }
+    #[expect(
+        clippy::cast_possible_truncation,
+        reason = "the decimal exponent of a finite f64 lies in −324 … 309"
+    )]
     let digits = (2 - v.abs().log10().floor() as i32).max(0);
     format!("{v:.*}", usize::try_from(digits).unwrap_or(0))
 }

@@ -12,6 +12,11 @@
 //!   plus the rasterizer's per-triangle setup and the ray tracer's build,
 //!   which do not grow).
 
+#![expect(
+    clippy::cast_precision_loss,
+    reason = "statistics over counts and sizes below 2^53, exact in f64"
+)]
+
 use std::path::PathBuf;
 use std::time::Instant;
 

@@ -1,5 +1,12 @@
 //! Integration tests (one binary). Each module says what it covers.
 
+#![allow(
+    clippy::cast_possible_truncation,
+    clippy::cast_precision_loss,
+    clippy::cast_sign_loss,
+    clippy::cast_possible_wrap,
+    reason = "test and bench fixtures: small generated counts, indices and rates, where a wrong cast fails the check instead of reaching a user"
+)]
 /// Adversarial geometry: extreme scales, degenerate triangles, a million
 /// triangles in a pixel, eyes and lights inside objects.
 mod adversarial;

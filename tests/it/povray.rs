@@ -179,7 +179,7 @@ fn both_backends_match_povray_in_mesh_mode() {
                 // Still: every differing pixel is explained, and apart
                 // from the documented cause the scene meets the bound.
                 assert_eq!(e.unexplained, 0, "{name} {backend}: unexplained pixels");
-                let pixels = (job.tri.camera.width() * job.tri.camera.height()) as f64;
+                let pixels = f64::from(job.tri.camera.width() * job.tri.camera.height());
                 let rest = frac + cause(&e) as f64 / pixels;
                 assert!(
                     rest >= FRACTION,
@@ -200,7 +200,7 @@ fn both_backends_match_povray_in_mesh_mode() {
             );
             // Differences born along secondary rays stay rare: at most 1 in 10^4 pixels.
             assert!(
-                e.ray_tree * 10_000 <= (job.tri.camera.width() * job.tri.camera.height()) as u64,
+                e.ray_tree * 10_000 <= u64::from(job.tri.camera.width() * job.tri.camera.height()),
                 "{name} {backend}: {} ray-tree differences",
                 e.ray_tree
             );
@@ -236,7 +236,7 @@ fn analytic_shapes_match_povray() {
             e.unexplained
         );
         assert_eq!(e.unexplained, 0, "{name}");
-        let pixels = (job.tri.camera.width() * job.tri.camera.height()) as f64;
+        let pixels = f64::from(job.tri.camera.width() * job.tri.camera.height());
         let set_aside = EXCEPTIONS
             .iter()
             .find(|(n, ..)| *n == name)

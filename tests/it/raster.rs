@@ -503,7 +503,7 @@ fn drift_is_bounded_on_the_longest_spans_and_edges() {
         let d = raster::measure_drift(&scene);
         assert!(d.samples > 10_000, "{w}x{h}: only {} samples", d.samples);
         assert!(
-            d.longest_span as f64 >= 0.5 * f64::from(w.max(2)) || h > w,
+            f64::from(d.longest_span) >= 0.5 * f64::from(w.max(2)) || h > w,
             "{w}x{h}: longest span {}",
             d.longest_span
         );

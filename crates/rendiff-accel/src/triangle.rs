@@ -339,6 +339,13 @@ pub(crate) fn f32_at_most(t: f64) -> f32 {
 pub use rendiff_core::math::plane_barycentrics;
 
 #[cfg(test)]
+#[allow(
+    clippy::cast_possible_truncation,
+    clippy::cast_precision_loss,
+    clippy::cast_sign_loss,
+    clippy::cast_possible_wrap,
+    reason = "test fixtures: small generated counts and indices, where a wrong cast fails the test"
+)]
 mod tests {
     use super::*;
 

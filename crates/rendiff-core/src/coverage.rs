@@ -550,6 +550,13 @@ fn clip_range(lo: i64, hi: i64, within: &Range<u32>) -> Range<u32> {
 }
 
 #[cfg(test)]
+#[allow(
+    clippy::cast_possible_truncation,
+    clippy::cast_precision_loss,
+    clippy::cast_sign_loss,
+    clippy::cast_possible_wrap,
+    reason = "test fixtures: small generated counts and indices, where a wrong cast fails the test"
+)]
 mod tests {
     use super::*;
 

@@ -754,7 +754,8 @@ impl Grid {
             #[expect(
                 clippy::cast_possible_truncation,
                 clippy::cast_sign_loss,
-                reason = "clamped to the grid"
+                clippy::cast_precision_loss,
+                reason = "clamped to the grid (at most a few thousand cells: exact in f64)"
             )]
             let k = (v / self.cell).floor().clamp(0.0, (n - 1) as f64) as usize;
             k

@@ -300,11 +300,19 @@ fn newell(
 /// are returned with the pairs, for the caller to give back.
 fn candidate_pairs(items: &[Item<'_>], budget: &Budget) -> Result<(Vec<u64>, u64), OverBudget> {
     let n = items.len();
+    #[expect(
+        clippy::cast_precision_loss,
+        reason = "spans of 1/256 px fixed point inside a 16 384 px image (< 2^23): exact"
+    )]
     let area: f64 = items
         .iter()
         .map(|it| ((it.hi.0 - it.lo.0) as f64 / 256.0) * ((it.hi.1 - it.lo.1) as f64 / 256.0))
         .sum();
-    #[expect(clippy::cast_possible_truncation, reason = "clamped to 4 … 64 px")]
+    #[expect(
+        clippy::cast_possible_truncation,
+        clippy::cast_precision_loss,
+        reason = "clamped to 4 … 64 px; the item count is exact in f64 below 2^53"
+    )]
     let cell_px = (8.0 * area / n.max(1) as f64).sqrt().clamp(4.0, 64.0) as i64;
     let cell = cell_px * 256;
     let cells_of = |it: &Item<'_>| {

@@ -1508,6 +1508,10 @@ pub fn triangulate(
     let diameter = points.diameter();
     check_enough_points(outline, holes)?;
     let normal = unit_normal(outline, diameter)?;
+    #[expect(
+        clippy::cast_precision_loss,
+        reason = "a corner count is far below 2^53: exact in f64"
+    )]
     let centroid = outline.iter().copied().sum::<DVec3>() / outline.len() as f64;
     if opts.check_planarity {
         points.check_planar(normal, centroid, diameter)?;
@@ -1600,6 +1604,13 @@ pub(crate) fn check_uv_affine(
 }
 
 #[cfg(test)]
+#[allow(
+    clippy::cast_possible_truncation,
+    clippy::cast_precision_loss,
+    clippy::cast_sign_loss,
+    clippy::cast_possible_wrap,
+    reason = "test fixtures: small generated counts and indices, where a wrong cast fails the test"
+)]
 mod tests {
     use super::*;
 

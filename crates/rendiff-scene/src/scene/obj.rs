@@ -738,6 +738,13 @@ pub(crate) fn load_obj_within(
 }
 
 #[cfg(test)]
+#[allow(
+    clippy::cast_possible_truncation,
+    clippy::cast_precision_loss,
+    clippy::cast_sign_loss,
+    clippy::cast_possible_wrap,
+    reason = "test fixtures: small generated counts and indices, where a wrong cast fails the test"
+)]
 mod tests {
     use super::*;
 

@@ -172,7 +172,11 @@ pub(crate) fn explain_pixel(
                     if nx < 0 || ny < 0 || nx >= i64::from(sw) || ny >= i64::from(sh) {
                         continue;
                     }
-                    #[expect(clippy::cast_sign_loss, reason = "checked non-negative")]
+                    #[expect(
+                        clippy::cast_sign_loss,
+                        clippy::cast_possible_truncation,
+                        reason = "checked inside the u32 sample grid"
+                    )]
                     let j = (ny as usize) * (sw as usize) + nx as usize;
                     // A silhouette: the neighbour sees another object or
                     // the background (inside one mesh, the exact distance

@@ -135,6 +135,13 @@ pub fn ssim(w: u32, h: u32, a: &[Rgb], b: &[Rgb]) -> f64 {
 }
 
 #[cfg(test)]
+#[allow(
+    clippy::cast_possible_truncation,
+    clippy::cast_precision_loss,
+    clippy::cast_sign_loss,
+    clippy::cast_possible_wrap,
+    reason = "test fixtures: small generated counts and indices, where a wrong cast fails the test"
+)]
 mod tests {
     use super::*;
 

@@ -231,7 +231,11 @@ fn on_boundary(f: &Frame, x: u32, y: u32, mask: u32) -> bool {
             {
                 continue;
             }
-            #[expect(clippy::cast_sign_loss, reason = "checked non-negative")]
+            #[expect(
+                clippy::cast_sign_loss,
+                clippy::cast_possible_truncation,
+                reason = "checked inside the u32 sample grid"
+            )]
             let i = (ny as usize) * (w as usize) + nx as usize;
             if f.flags[i] & mask != here {
                 return true;
