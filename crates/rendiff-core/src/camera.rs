@@ -427,13 +427,22 @@ impl Camera {
         }
     }
 
+    /// `p` in view coordinates: `(x, y, z)` along `right`, `up` and
+    /// `forward`, relative to the eye. The one world → view transform: the
+    /// rasterizer's homogeneous vertices, the painter's depth order, the
+    /// plan's frustum test and [`Camera::project`] all start from it, so
+    /// they round alike.
+    #[must_use]
+    pub fn to_view(&self, p: DVec3) -> DVec3 {
+        let rel = p - self.eye;
+        DVec3::new(rel.dot(self.r), rel.dot(self.u), rel.dot(self.f))
+    }
+
     /// The screen point whose primary ray passes through `p`, and its view
     /// depth; `None` when `p` is not in front of the eye plane (perspective).
     #[must_use]
     pub fn project(&self, p: DVec3) -> Option<(f64, f64, f64)> {
-        let rel = p - self.eye;
-        let z = rel.dot(self.f);
-        let (a, b) = (rel.dot(self.r), rel.dot(self.u));
+        let DVec3 { x: a, y: b, z } = self.to_view(p);
         let (sx, sy) = match self.projection {
             Projection::Perspective { tan_half_fov: t } => {
                 if z <= 0.0 {

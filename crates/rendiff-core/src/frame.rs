@@ -4,6 +4,8 @@
 
 use std::path::Path;
 
+use rayon::prelude::*;
+
 use crate::color::Rgb;
 use crate::image_io::{self, ImageIoError, PngEncoding};
 
@@ -41,7 +43,121 @@ pub struct Frame {
     pub flags: Vec<u32>,
 }
 
+/// What a backend found at one sample, as the frame stores it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Sample {
+    /// Linear colour, every channel finite.
+    pub color: Rgb,
+    /// `t` along the unit primary ray; +∞ for the background.
+    pub depth: f32,
+    /// Visible primitive, or [`BACKGROUND`].
+    pub id: u32,
+    /// Shading flags (see [`Frame::flags`]).
+    pub flags: u32,
+}
+
+impl Sample {
+    /// A sample that sees the background.
+    #[must_use]
+    pub fn background(color: Rgb) -> Sample {
+        Sample {
+            color,
+            depth: f32::INFINITY,
+            id: BACKGROUND,
+            flags: 0,
+        }
+    }
+
+    /// A sample that sees primitive `id` at frame depth `depth` (computed
+    /// in f64 from the f64 hit point, rounded once to f32 here). A
+    /// non-finite colour channel (a NaN from a degenerate shading input)
+    /// becomes 0: a frame never holds a NaN pixel.
+    #[must_use]
+    pub fn hit(color: Rgb, depth: f64, id: u32, flags: u32) -> Sample {
+        let finite = |v: f32| if v.is_finite() { v } else { 0.0 };
+        #[expect(clippy::cast_possible_truncation, reason = "frame depth is f32")]
+        let depth = depth as f32;
+        Sample {
+            color: Rgb::new(finite(color.r), finite(color.g), finite(color.b)),
+            depth,
+            id,
+            flags,
+        }
+    }
+}
+
+/// A band of consecutive sample rows of a frame, lent to one worker by
+/// [`Frame::par_bands`].
+#[derive(Debug)]
+pub struct Band<'a> {
+    /// The first sample row of the band.
+    pub y0: u32,
+    /// Sample rows in the band (the last band may be shorter).
+    pub rows: u32,
+    width: u32,
+    color: &'a mut [Rgb],
+    depth: &'a mut [f32],
+    id: &'a mut [u32],
+    flags: &'a mut [u32],
+}
+
+impl Band<'_> {
+    /// Stores `s` at sample column `sx` of the band's row `dy`.
+    ///
+    /// # Panics
+    ///
+    /// When `(sx, dy)` lies outside the band.
+    pub fn set(&mut self, sx: u32, dy: u32, s: Sample) {
+        assert!(sx < self.width && dy < self.rows, "sample outside the band");
+        let i = (dy as usize) * (self.width as usize) + sx as usize;
+        self.color[i] = s.color;
+        self.depth[i] = s.depth;
+        self.id[i] = s.id;
+        self.flags[i] = s.flags;
+    }
+}
+
 impl Frame {
+    /// Fills the sample buffers in parallel: `f` is called once per band
+    /// of `rows` sample rows (in any order, on rayon's workers) and its
+    /// results are returned in band order. Samples `f` does not set keep
+    /// the background.
+    ///
+    /// # Panics
+    ///
+    /// When `rows` is 0.
+    pub fn par_bands<T: Send>(
+        &mut self,
+        rows: u32,
+        f: impl Fn(&mut Band<'_>) -> T + Sync,
+    ) -> Vec<T> {
+        assert!(rows > 0, "a band has at least one row");
+        let width = self.sample_width();
+        let height = self.sample_height();
+        let len = (rows as usize) * (width as usize);
+        let (colors, depths, ids, flags) = self.sample_buffers_mut();
+        colors
+            .par_chunks_mut(len.max(1))
+            .zip(depths.par_chunks_mut(len.max(1)))
+            .zip(ids.par_chunks_mut(len.max(1)))
+            .zip(flags.par_chunks_mut(len.max(1)))
+            .enumerate()
+            .map(|(b, (((color, depth), id), flags))| {
+                let y0 = u32::try_from(b).map_or(u32::MAX, |b| b.saturating_mul(rows));
+                let mut band = Band {
+                    y0,
+                    rows: rows.min(height - y0),
+                    width,
+                    color,
+                    depth,
+                    id,
+                    flags,
+                };
+                f(&mut band)
+            })
+            .collect()
+    }
+
     /// An empty (background) frame.
     #[must_use]
     pub fn new(width: u32, height: u32, samples: u32, background: Rgb) -> Frame {
@@ -91,9 +207,9 @@ impl Frame {
         }
     }
 
-    /// The sample colours and the other per-sample buffers at once, for a
-    /// renderer filling them in parallel: (colour, depth, id, flags).
-    pub fn sample_buffers_mut(&mut self) -> (&mut [Rgb], &mut [f32], &mut [u32], &mut [u32]) {
+    /// The sample colours and the other per-sample buffers at once:
+    /// (colour, depth, id, flags).
+    fn sample_buffers_mut(&mut self) -> (&mut [Rgb], &mut [f32], &mut [u32], &mut [u32]) {
         let color = if self.samples == 1 {
             &mut self.color
         } else {

@@ -35,9 +35,8 @@ use rayon::prelude::*;
 use clip::{HVert, clip_polygon, planes};
 use rendiff_accel::{Accel, AccelOptions, ShadowRays};
 use rendiff_core::camera::Projection;
-use rendiff_core::color::Rgb;
 use rendiff_core::coverage::{FillRule, SampleGrid, SnappedTri, Sub8, bbox_samples, doubled_area};
-use rendiff_core::frame::{BACKGROUND, Frame};
+use rendiff_core::frame::{BACKGROUND, Frame, Sample};
 use rendiff_core::math::{DVec3, to_f64};
 use rendiff_core::options::{DepthFormat, ShadowMode};
 use rendiff_core::shade::{self, Unoccluded, Visibility};
@@ -262,15 +261,17 @@ pub fn render(scene: &TriScene, opts: &RasterOptions) -> (Frame, RasterStats) {
 fn homogeneous(scene: &TriScene, perturb: Perturb) -> Vec<HVert> {
     let cam = &scene.camera;
     let (w, h) = (f64::from(cam.width()), f64::from(cam.height()));
-    let (e, f, r, u) = (cam.eye(), cam.forward(), cam.right(), cam.up());
     let a = cam.aspect();
     let off = perturb.offset_px;
     scene
         .positions
         .par_iter()
         .map(|p| {
-            let rel = to_f64(*p) - e;
-            let (xc, yc, zc) = (rel.dot(r), rel.dot(u), rel.dot(f));
+            let DVec3 {
+                x: xc,
+                y: yc,
+                z: zc,
+            } = cam.to_view(to_f64(*p));
             match cam.projection() {
                 Projection::Perspective { tan_half_fov: t } => HVert {
                     xh: (xc / (t * a) + zc) * w / 2.0 + off * zc,
@@ -850,21 +851,15 @@ fn shade_pass(
     };
     let mut frame = Frame::new(cam.width(), cam.height(), cam.samples(), scene.background);
     let w = sw as usize;
-    let (colors, depths, id_buf, flag_buf) = frame.sample_buffers_mut();
-    let shadow_rays: u64 = colors
-        .par_chunks_mut(w)
-        .zip(depths.par_chunks_mut(w))
-        .zip(id_buf.par_chunks_mut(w))
-        .zip(flag_buf.par_chunks_mut(w))
-        .enumerate()
-        .map(|(sy, (((color, depth), ids), flags))| {
+    let shadow_rays: u64 = frame
+        .par_bands(1, |band| {
             let rays = accel.as_ref().map(ShadowRays::new);
             let visibility: &dyn Visibility = match (&rays, &map) {
                 (Some(r), _) => r,
                 (None, Some(m)) => m,
                 (None, None) => &Unoccluded,
             };
-            let sy = u32::try_from(sy).unwrap_or(0);
+            let sy = band.y0;
             for sx in 0..sw {
                 let i = (sy as usize) * w + sx as usize;
                 let tri = vis.id[i];
@@ -879,18 +874,12 @@ fn shade_pass(
                 let sp = scene.surface_at(tri, b);
                 let ray = cam.primary_ray(x, y);
                 let shaded = shade::shade(&ctx, &sp, ray.dir, visibility);
-                let c = shaded.local;
-                let finite = |x: f32| if x.is_finite() { x } else { 0.0 };
-                color[sx as usize] = Rgb::new(finite(c.r), finite(c.g), finite(c.b));
-                #[expect(clippy::cast_possible_truncation, reason = "frame depth is f32")]
-                {
-                    depth[sx as usize] = cam.frame_depth(p64) as f32;
-                }
-                ids[sx as usize] = tri;
-                flags[sx as usize] = shaded.flags;
+                let s = Sample::hit(shaded.local, cam.frame_depth(p64), tri, shaded.flags);
+                band.set(sx, 0, s);
             }
             rays.as_ref().map_or(0, ShadowRays::cast)
         })
+        .into_iter()
         .sum();
     frame.resolve();
     let maps = map.as_ref().map_or(0, shadow_map::ShadowMaps::count);

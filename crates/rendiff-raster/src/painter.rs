@@ -165,7 +165,6 @@ fn order_records(
 /// (overlaps off the screen cover no sample).
 fn items<'r>(scene: &TriScene, recs: &'r [Record], screen: (i64, i64)) -> Vec<Item<'r>> {
     let cam = &scene.camera;
-    let (e, f, r, u) = (cam.eye(), cam.forward(), cam.right(), cam.up());
     let mut out: Vec<Item<'r>> = Vec::new();
     for rec in recs {
         let lo = (
@@ -184,10 +183,7 @@ fn items<'r>(scene: &TriScene, recs: &'r [Record], screen: (i64, i64)) -> Vec<It
             last.hi = (last.hi.0.max(hi.0), last.hi.1.max(hi.1));
             continue;
         }
-        let view = scene.triangle(rec.tri).map(|p| {
-            let q = to_f64(p) - e;
-            DVec3::new(q.dot(r), q.dot(u), q.dot(f))
-        });
+        let view = scene.triangle(rec.tri).map(|p| cam.to_view(to_f64(p)));
         let zmin = view[0].z.min(view[1].z).min(view[2].z);
         let zmax = view[0].z.max(view[1].z).max(view[2].z);
         out.push(Item {

@@ -14,17 +14,15 @@
 //!    refraction by the ray's list of refracting objects it is inside,
 //!    total internal reflection added unfiltered, nothing at the depth limit.
 //!
-//! Parallel over bands of 16 sample rows with rayon, each traced in
+//! Parallel over bands of 16 sample rows ([`Frame::par_bands`]), each traced in
 //! 16×16-sample tiles; every sample is computed independently, so the
 //! output is bit-identical for any thread count.
 
 #![warn(missing_docs, missing_debug_implementations)]
 
-use rayon::prelude::*;
-
 use rendiff_accel::{Accel, Hit, ShadowRays};
 use rendiff_core::color::Rgb;
-use rendiff_core::frame::{BACKGROUND, Frame};
+use rendiff_core::frame::{Frame, Sample};
 use rendiff_core::math::{DVec3, Ray, Ray64, Vec3, to_f64};
 use rendiff_core::shade::{self, ShadeContext, Shaded, SurfacePoint};
 use rendiff_core::tri_scene::{Prim, TriScene};
@@ -117,15 +115,6 @@ struct Tracer<'a, 's> {
     eye_inside: Vec<u32>,
 }
 
-/// One sample's result.
-#[derive(Clone, Copy, Debug)]
-struct SampleOut {
-    color: Rgb,
-    depth: f32,
-    id: u32,
-    flags: u32,
-}
-
 /// Renders a scene with the given accelerator.
 #[must_use]
 pub fn render(accel: &Accel<'_>, opts: &RayOptions) -> Frame {
@@ -162,35 +151,21 @@ pub fn render_counted(accel: &Accel<'_>, opts: &RayOptions) -> (Frame, RayStats)
         max_depth: opts.max_depth.max(1),
         eye_inside,
     };
-    let (sw, sh) = (cam.sample_width(), cam.sample_height());
+    let sw = cam.sample_width();
     // Bands of TILE sample rows, each traced in TILE×TILE tiles (coherent
     // rays), written straight into the frame's rows.
     let mut frame = Frame::new(cam.width(), cam.height(), cam.samples(), scene.background);
-    let band = (TILE * sw) as usize;
-    let (colors, depths, ids, flags) = frame.sample_buffers_mut();
-    let stats = colors
-        .par_chunks_mut(band)
-        .zip(depths.par_chunks_mut(band))
-        .zip(ids.par_chunks_mut(band))
-        .zip(flags.par_chunks_mut(band))
-        .enumerate()
-        .map(|(b, (((color, depth), id), flag))| {
+    let stats = frame
+        .par_bands(TILE, |band| {
             let mut w = Worker {
                 vis: ShadowRays::new(accel),
                 secondary: 0,
             };
-            let y0 = u32::try_from(b).unwrap_or(0) * TILE;
-            let rows = (sh - y0).min(TILE);
             let mut primary = 0u64;
             for tx in (0..sw).step_by(TILE as usize) {
-                for dy in 0..rows {
+                for dy in 0..band.rows {
                     for sx in tx..(tx + TILE).min(sw) {
-                        let s = tracer.sample(sx, y0 + dy, &mut w);
-                        let i = (dy as usize) * (sw as usize) + sx as usize;
-                        color[i] = s.color;
-                        depth[i] = s.depth;
-                        id[i] = s.id;
-                        flag[i] = s.flags;
+                        band.set(sx, dy, tracer.sample(sx, band.y0 + dy, &mut w));
                         primary += 1;
                     }
                 }
@@ -201,45 +176,28 @@ pub fn render_counted(accel: &Accel<'_>, opts: &RayOptions) -> (Frame, RayStats)
                 secondary: w.secondary,
             }
         })
-        .reduce(RayStats::default, |a, b| a + b);
+        .into_iter()
+        .fold(RayStats::default(), |a, b| a + b);
     frame.resolve();
     (frame, stats)
 }
 
-/// A colour with non-finite channels replaced by 0: never a NaN pixel.
-fn sanitize(c: Rgb) -> Rgb {
-    let f = |v: f32| if v.is_finite() { v } else { 0.0 };
-    Rgb::new(f(c.r), f(c.g), f(c.b))
-}
-
 impl Tracer<'_, '_> {
-    fn sample(&self, sx: u32, sy: u32, w: &mut Worker<'_, '_>) -> SampleOut {
+    fn sample(&self, sx: u32, sy: u32, w: &mut Worker<'_, '_>) -> Sample {
         let cam = &self.scene.camera;
         let (x, y) = cam.sample_point(sx, sy);
         let ray64 = cam.primary_ray64(x, y);
         let (o64, d64) = (ray64.origin, ray64.dir);
         let ray = cam.primary_ray(x, y);
         let Some(hit) = self.accel.intersect(&ray64) else {
-            return SampleOut {
-                color: self.scene.background,
-                depth: f32::INFINITY,
-                id: BACKGROUND,
-                flags: 0,
-            };
+            return Sample::background(self.scene.background);
         };
         let (sp, p64) = self.surface(&hit, o64, d64);
         let shaded = shade::shade(&self.ctx, &sp, ray.dir, &w.vis);
         let mut inside = self.eye_inside.clone();
         let color =
             shaded.local + self.children(w, &sp, &shaded, ray.dir, Depth::PRIMARY, &mut inside);
-        #[expect(clippy::cast_possible_truncation, reason = "frame depth is f32")]
-        let depth = cam.frame_depth(p64) as f32;
-        SampleOut {
-            color: sanitize(color),
-            depth,
-            id: hit.prim,
-            flags: shaded.flags,
-        }
+        Sample::hit(color, cam.frame_depth(p64), hit.prim, shaded.flags)
     }
 
     /// Shading inputs and the f64 hit point of a hit of the ray `(o, d)`

@@ -330,8 +330,8 @@ fn outside_frustum(scene: &TriScene, b: rendiff_core::math::Aabb) -> bool {
     }
     let cam = &scene.camera;
     let corners: Vec<DVec3> = b.corners().iter().map(|c| to_f64(*c)).collect();
-    let (e, f, r, u) = (cam.eye(), cam.forward(), cam.right(), cam.up());
-    let z: Vec<f64> = corners.iter().map(|c| (*c - e).dot(f)).collect();
+    let view: Vec<DVec3> = corners.iter().map(|c| cam.to_view(*c)).collect();
+    let z: Vec<f64> = view.iter().map(|v| v.z).collect();
     if z.iter().all(|&z| z < cam.near()) || z.iter().all(|&z| z > cam.far()) {
         return true;
     }
@@ -339,13 +339,13 @@ fn outside_frustum(scene: &TriScene, b: rendiff_core::math::Aabb) -> bool {
     let (sx, sy) = match cam.projection() {
         rendiff_core::camera::Projection::Perspective { tan_half_fov: t } => (t * aspect, t),
         rendiff_core::camera::Projection::Orthographic { .. } => {
-            return outside_ortho(scene, &corners);
+            return outside_ortho(scene, &view);
         }
     };
     // Side planes: |x| ≤ sx·z, |y| ≤ sy·z (with a relative margin).
     let margin = 1e-6;
-    let xs: Vec<f64> = corners.iter().map(|c| (*c - e).dot(r)).collect();
-    let ys: Vec<f64> = corners.iter().map(|c| (*c - e).dot(u)).collect();
+    let xs: Vec<f64> = view.iter().map(|v| v.x).collect();
+    let ys: Vec<f64> = view.iter().map(|v| v.y).collect();
     let all = |pred: &dyn Fn(usize) -> bool| (0..8).all(pred);
     all(&|k| xs[k] > sx * z[k] * (1.0 + margin) + margin)
         || all(&|k| -xs[k] > sx * z[k] * (1.0 + margin) + margin)
@@ -353,16 +353,15 @@ fn outside_frustum(scene: &TriScene, b: rendiff_core::math::Aabb) -> bool {
         || all(&|k| -ys[k] > sy * z[k] * (1.0 + margin) + margin)
 }
 
-fn outside_ortho(scene: &TriScene, corners: &[DVec3]) -> bool {
+fn outside_ortho(scene: &TriScene, view: &[DVec3]) -> bool {
     let cam = &scene.camera;
     let rendiff_core::camera::Projection::Orthographic { view_height: h } = cam.projection() else {
         return false;
     };
     let (hw, hh) = (h * cam.aspect() / 2.0, h / 2.0);
-    let (e, r, u) = (cam.eye(), cam.right(), cam.up());
     let margin = 1e-6 * h;
-    let xs: Vec<f64> = corners.iter().map(|c| (*c - e).dot(r)).collect();
-    let ys: Vec<f64> = corners.iter().map(|c| (*c - e).dot(u)).collect();
+    let xs: Vec<f64> = view.iter().map(|v| v.x).collect();
+    let ys: Vec<f64> = view.iter().map(|v| v.y).collect();
     xs.iter().all(|&x| x > hw + margin)
         || xs.iter().all(|&x| x < -hw - margin)
         || ys.iter().all(|&y| y > hh + margin)
