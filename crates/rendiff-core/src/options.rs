@@ -34,6 +34,12 @@ macro_rules! parse_error {
     };
 }
 
+/// The largest side of every raster rendiff makes or reads: the image
+/// (DESIGN.md §4), a texture, a shadow map. In the 1/256-pixel fixed
+/// point of [`crate::coverage`] a coordinate stays below 2^22 (edge
+/// products far inside i64), and a texel coordinate is exact in f32.
+pub const MAX_SIDE: u32 = 16_384;
+
 /// Format of the rasterizer's depth buffer (DESIGN.md §2).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum DepthFormat {
@@ -55,6 +61,15 @@ impl DepthFormat {
             DepthFormat::U24 => Some(24),
             DepthFormat::U16 => Some(16),
         }
+    }
+
+    /// The largest key of an integer format, `2^bits − 1`: the normalised
+    /// depth `q ∈ [0, 1]` is stored as `round(q · max_key)`, so one step of
+    /// `q` is `1 / max_key` (the rasterizer quantises with it, the
+    /// verdict's depth resolution is derived from it). `None` for f32.
+    #[must_use]
+    pub fn max_key(self) -> Option<f64> {
+        self.bits().map(|b| f64::from((1u32 << b) - 1))
     }
 }
 
@@ -97,7 +112,7 @@ impl ShadowMode {
     /// Smallest shadow-map resolution.
     pub const MIN_RES: u32 = 64;
     /// Largest shadow-map resolution.
-    pub const MAX_RES: u32 = 16_384;
+    pub const MAX_RES: u32 = MAX_SIDE;
 }
 
 impl fmt::Display for ShadowMode {

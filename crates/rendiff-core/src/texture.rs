@@ -48,7 +48,7 @@ pub struct TextureError {
 
 impl Texture {
     /// Largest accepted side in texels.
-    pub const MAX_SIDE: u32 = 16_384;
+    pub const MAX_SIDE: u32 = crate::options::MAX_SIDE;
 
     /// Decodes PNG bytes; `path` names the file in errors and exports.
     ///

@@ -232,8 +232,7 @@ impl DepthMap {
                 u32::MAX - 1 - ordered.min(u32::MAX - 1)
             }
             DepthFormat::U24 | DepthFormat::U16 => {
-                let bits = self.format.bits().unwrap_or(24);
-                let max = f64::from((1u32 << bits) - 1);
+                let max = self.format.max_key().unwrap_or(f64::from(u32::MAX));
                 let q = if self.perspective {
                     (1.0 / self.near - v) / (1.0 / self.near - 1.0 / self.far)
                 } else {

@@ -32,7 +32,7 @@ use rendiff_core::shade::{Bump, BumpMethod, Light, LightKind, Material, Pigment}
 use rendiff_core::texture::Texture;
 
 /// Largest image side (DESIGN.md §4).
-pub const MAX_IMAGE_SIDE: u32 = 16_384;
+pub const MAX_IMAGE_SIDE: u32 = rendiff_core::options::MAX_SIDE;
 
 /// `[image]`.
 #[derive(Clone, Debug, PartialEq)]

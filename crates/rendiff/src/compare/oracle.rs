@@ -331,8 +331,7 @@ impl<'a> Oracle<'a> {
             }
             // One quantisation step of q, mapped back to depth.
             DepthFormat::U24 | DepthFormat::U16 => {
-                let bits = self.depth.bits().unwrap_or(24);
-                let step = 1.0 / f64::from((1u32 << bits) - 1);
+                let step = 1.0 / self.depth.max_key().unwrap_or(f64::from(u32::MAX));
                 let dz = if perspective {
                     step * z * z * (1.0 / near - 1.0 / far)
                 } else {
