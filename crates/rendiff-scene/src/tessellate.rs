@@ -20,9 +20,9 @@
 
 use std::collections::HashMap;
 
-use crate::scene::{LoadError, MAX_COORDINATE, Object, ProjectionDesc, Scene, Shape};
+use crate::scene::{LoadError, MAX_COORDINATE, Object, Scene, Shape};
 use rendiff_core::analytic::{AnalyticKind, Placed, superellipsoid_f, superellipsoid_gradient};
-use rendiff_core::camera::{Camera, Projection};
+use rendiff_core::camera::Camera;
 use rendiff_core::math::{Aabb, DMat3, DVec3, Vec2, Vec3, to_f32, to_f64};
 use rendiff_core::tri_scene::{AnalyticShape, NO_INDEX, ObjectInfo, TriScene};
 
@@ -116,61 +116,6 @@ struct Piece {
     tri_uvs: Vec<[u32; 3]>,
     smooth: bool,
     segments: Option<u32>,
-}
-
-/// The camera of a scene at its final size (far from `far` or `2·near`
-/// until the bounds are known).
-///
-/// # Errors
-///
-/// [`LoadError::Scene`] if the camera frame is degenerate.
-pub(crate) fn scene_camera(scene: &Scene, opts: &TessOptions) -> Result<Camera, LoadError> {
-    let (w, h) = opts.size.unwrap_or((scene.image.width, scene.image.height));
-    let samples = opts.samples.unwrap_or(scene.image.samples);
-    let c = &scene.camera;
-    let projection = match c.projection {
-        ProjectionDesc::Perspective { fov_y_deg } => Projection::Perspective {
-            tan_half_fov: (fov_y_deg.to_radians() / 2.0).tan(),
-        },
-        ProjectionDesc::Orthographic { view_height } => Projection::Orthographic { view_height },
-    };
-    let camera = Camera::new(
-        c.eye,
-        c.look_at,
-        c.up,
-        projection,
-        w,
-        h,
-        samples,
-        c.near,
-        c.far.unwrap_or(2.0 * c.near),
-    )
-    .map_err(|e| LoadError::Scene {
-        path: scene.path.clone(),
-        message: format!("camera: {e}"),
-    })?;
-    check_resolution(scene, &camera)?;
-    Ok(camera)
-}
-
-pub use rendiff_core::camera::MIN_PIXEL_ANGLE;
-
-/// Refuses a view too narrow for `f64` camera rays at the final size
-/// ([`MIN_PIXEL_ANGLE`]; the loader checks the scene's own size, `--size`
-/// may shrink the pixels further).
-fn check_resolution(scene: &Scene, camera: &Camera) -> Result<(), LoadError> {
-    match rendiff_core::camera::resolution_problem(
-        camera.projection(),
-        camera.eye().abs().max_element(),
-        camera.width(),
-        camera.height(),
-    ) {
-        Some((key, message)) => Err(LoadError::Scene {
-            path: scene.path.clone(),
-            message: format!("camera.{key}: {message}"),
-        }),
-        None => Ok(()),
-    }
 }
 
 /// Largest singular value of a 3×3 matrix (power iteration on MᵀM).
@@ -688,7 +633,7 @@ pub fn tessellate_within(
     opts: &TessOptions,
     shared: &rendiff_core::budget::Budget,
 ) -> Result<TriScene, LoadError> {
-    let camera = scene_camera(scene, opts)?;
+    let camera = scene.build_camera(opts.size, opts.samples)?;
     let err_px = scene.render.tessellation_error;
     let mut out = TriScene {
         positions: Vec::new(),

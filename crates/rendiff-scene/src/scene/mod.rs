@@ -25,6 +25,7 @@ use reader::{At, Source, Table, num};
 use toml::de::{DeTable, DeValue};
 
 use crate::polygon::{self, PointRef, PolygonError, PolygonOptions};
+use rendiff_core::camera::{Camera, Projection};
 use rendiff_core::color::Rgb;
 use rendiff_core::math::{DVec3, Transform, TransformStep, to_f32};
 use rendiff_core::options::{BvhMode, DepthFormat, Geometry, ShadowMode};
@@ -266,6 +267,60 @@ pub struct ScaleError {
 }
 
 impl Scene {
+    /// The camera of this scene at the image size and samples given, or
+    /// the scene's own where `None` (`far` is the scene's, or `2·near`
+    /// until the tessellation knows the bounds).
+    ///
+    /// # Errors
+    ///
+    /// [`LoadError::Scene`] naming the camera key when the frame is
+    /// degenerate, the samples are not in {1, 2, 4, 8, 16}, or the
+    /// resolution cannot be represented (DESIGN.md §4).
+    pub fn build_camera(
+        &self,
+        size: Option<(u32, u32)>,
+        samples: Option<u32>,
+    ) -> Result<Camera, LoadError> {
+        let (w, h) = size.unwrap_or((self.image.width, self.image.height));
+        let samples = samples.unwrap_or(self.image.samples);
+        let c = &self.camera;
+        let projection = match c.projection {
+            ProjectionDesc::Perspective { fov_y_deg } => Projection::Perspective {
+                tan_half_fov: (fov_y_deg.to_radians() / 2.0).tan(),
+            },
+            ProjectionDesc::Orthographic { view_height } => {
+                Projection::Orthographic { view_height }
+            }
+        };
+        let camera = Camera::new(
+            c.eye,
+            c.look_at,
+            c.up,
+            projection,
+            w,
+            h,
+            samples,
+            c.near,
+            c.far.unwrap_or(2.0 * c.near),
+        )
+        .map_err(|e| LoadError::Scene {
+            path: self.path.clone(),
+            message: format!("camera: {e}"),
+        })?;
+        if let Some((key, message)) = rendiff_core::camera::resolution_problem(
+            camera.projection(),
+            camera.eye().abs().max_element(),
+            camera.width(),
+            camera.height(),
+        ) {
+            return Err(LoadError::Scene {
+                path: self.path.clone(),
+                message: format!("camera.{key}: {message}"),
+            });
+        }
+        Ok(camera)
+    }
+
     /// The scene's name: the file stem.
     #[must_use]
     pub fn name(&self) -> String {
