@@ -223,7 +223,18 @@ impl Object {
     }
 }
 
-/// A validated scene.
+/// A scene as the loader made it: every value checked against the ranges
+/// of DESIGN.md §4 and every reference (material, texture, mesh) resolved.
+///
+/// The fields are public so that a program can build or edit a scene
+/// (`rendiff bench` varies them; [`Scene::scaled`] moves one). The
+/// loader's checks do not follow such an edit: what the renderers rely on
+/// is checked again where it is used ([`Scene::build_camera`] refuses a
+/// degenerate camera, bad samples or an unrepresentable resolution; the
+/// tessellation refuses non-finite or oversized geometry, and
+/// `TriScene::debug_check` asserts the rest in debug builds), while a
+/// value outside its documented range that passes those (a phong size of
+/// 1e9, say) renders as the arithmetic says, not as an error.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Scene {
     /// The scene file.
