@@ -382,7 +382,7 @@ impl Bvh {
     /// With `flat = true` the whole set is one leaf (the flat loop that is
     /// faster for tiny scenes).
     #[must_use]
-    pub fn build(ids: &[u32], tri: impl Fn(u32) -> [Vec3; 3] + Sync, flat: bool) -> Bvh {
+    pub(crate) fn build(ids: &[u32], tri: impl Fn(u32) -> [Vec3; 3] + Sync, flat: bool) -> Bvh {
         let mut prims: Vec<PrimRef> = ids
             .iter()
             .enumerate()
@@ -532,7 +532,7 @@ impl Bvh {
 
     /// Statistics.
     #[must_use]
-    pub fn stats(&self) -> BvhStats {
+    pub(crate) fn stats(&self) -> BvhStats {
         let leaves = self
             .nodes
             .iter()
@@ -562,7 +562,7 @@ impl Bvh {
     /// (in `f64`, as the triangle test decides it) goes to the lower
     /// triangle id.
     #[must_use]
-    pub fn intersect(&self, ray: &Ray64) -> Option<BvhHit> {
+    pub(crate) fn intersect(&self, ray: &Ray64) -> Option<BvhHit> {
         let pre = RayPrecomp::new(ray, self.reach(ray));
         let mut best: Option<BvhHit> = None;
         let (t_min, mut best_t) = pre.t_range();
@@ -594,7 +594,7 @@ impl Bvh {
     /// Calls `visit(id, hit)` for every triangle hit with `t` in
     /// `[ray.t_min, ray.t_max]`, in no particular order; stops when `visit`
     /// returns `true`.
-    pub fn for_each_hit(&self, ray: &Ray64, mut visit: impl FnMut(u32, TriHit) -> bool) {
+    pub(crate) fn for_each_hit(&self, ray: &Ray64, mut visit: impl FnMut(u32, TriHit) -> bool) {
         let pre = RayPrecomp::new(ray, self.reach(ray));
         let mut t_prune = pre.ray.t_max;
         let (t_min, mut t_max) = pre.t_range();
@@ -808,4 +808,222 @@ fn set_lane(n: &mut Node4, k: usize, b: Aabb) {
     n.max_y[k] = b.max.y;
     n.min_z[k] = b.min.z;
     n.max_z[k] = b.max.z;
+}
+
+#[cfg(test)]
+mod tests {
+    //! The tree's invariants on generated triangle soups, and its hits
+    //! against a linear scan of the same triangle test: the contract the
+    //! module comment states ("exactly the hits a linear scan finds").
+    use super::*;
+    use proptest::prelude::*;
+    use rendiff_core::math::DVec3;
+
+    /// A deterministic soup: `n` triangles of size ~`size` in a unit cube,
+    /// with a few long thin ones and exact duplicates mixed in (ties).
+    fn soup(n: usize, seed: u64, size: f32) -> Vec<[Vec3; 3]> {
+        let mut s = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+        let mut next = move || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            #[expect(clippy::cast_precision_loss, reason = "24 random bits: exact in f32")]
+            let v = (s >> 40) as f32 / (1u64 << 24) as f32;
+            v
+        };
+        let mut out: Vec<[Vec3; 3]> = Vec::with_capacity(n);
+        for k in 0..n {
+            if k % 17 == 16 {
+                let dup = out[k / 2];
+                out.push(dup);
+                continue;
+            }
+            let c = Vec3::new(next(), next(), next());
+            let stretch = if k % 11 == 0 { 20.0 } else { 1.0 };
+            let mut corner =
+                || c + Vec3::new(next() - 0.5, next() - 0.5, next() - 0.5) * size * stretch;
+            out.push([corner(), corner(), corner()]);
+        }
+        out
+    }
+
+    fn build(tris: &[[Vec3; 3]], flat: bool) -> Bvh {
+        let ids: Vec<u32> = (0..u32::try_from(tris.len()).unwrap()).collect();
+        Bvh::build(&ids, |id| tris[id as usize], flat)
+    }
+
+    /// The closest hit by testing every triangle (ties to the lower id).
+    fn linear(tris: &[[Vec3; 3]], ray: &Ray64, reach: f64) -> Option<(u32, f64)> {
+        let pre = RayPrecomp::new(ray, reach);
+        let (t_min, t_max) = pre.t_range();
+        let mut best: Option<(u32, f64)> = None;
+        for (id, v) in tris.iter().enumerate() {
+            if let Some(h) = intersect(&pre, v, t_min, t_max) {
+                let id = u32::try_from(id).unwrap();
+                if best.is_none_or(|(_, t)| h.t64 < t) {
+                    best = Some((id, h.t64));
+                }
+            }
+        }
+        best
+    }
+
+    /// Every triangle sits in exactly one lane, every child box contains
+    /// the triangles below it, and no leaf is longer than `MAX_LEAF`
+    /// triangles.
+    fn check_structure(bvh: &Bvh, tris: &[[Vec3; 3]]) {
+        fn below(bvh: &Bvh, c: u32, leaf_ids: &dyn Fn(u32) -> Vec<u32>, out: &mut Vec<u32>) {
+            if c & LEAF != 0 {
+                out.extend(leaf_ids(c));
+                return;
+            }
+            let n = &bvh.nodes[c as usize];
+            for k in 0..4 {
+                if n.used & (1 << k) != 0 {
+                    below(bvh, n.child[k], leaf_ids, out);
+                }
+            }
+        }
+        let mut seen = vec![0u32; tris.len()];
+        for &id in bvh.ids.iter().filter(|&&id| id != u32::MAX) {
+            seen[id as usize] += 1;
+        }
+        assert!(
+            seen.iter().all(|&c| c == 1),
+            "a triangle is missing or duplicated"
+        );
+        let leaf_ids = |first: u32| {
+            let mut out = Vec::new();
+            let mut p = (first & !LEAF) as usize;
+            loop {
+                let pack = &bvh.packs[p];
+                for lane in 0..pack.lanes as usize {
+                    out.push(bvh.ids[4 * p + lane]);
+                }
+                if pack.last {
+                    return out;
+                }
+                p += 1;
+            }
+        };
+        for n in &bvh.nodes {
+            for k in 0..4 {
+                if n.used & (1 << k) == 0 {
+                    assert_eq!(n.child[k], EMPTY, "an unused slot names a child");
+                    continue;
+                }
+                let lo = Vec3::new(n.min_x[k], n.min_y[k], n.min_z[k]);
+                let hi = Vec3::new(n.max_x[k], n.max_y[k], n.max_z[k]);
+                if n.child[k] & LEAF != 0 {
+                    assert!(leaf_ids(n.child[k]).len() <= MAX_LEAF, "leaf too long");
+                }
+                let mut ids = Vec::new();
+                below(bvh, n.child[k], &leaf_ids, &mut ids);
+                for id in ids {
+                    for p in tris[id as usize] {
+                        assert!(
+                            p.cmpge(lo).all() && p.cmple(hi).all(),
+                            "box misses triangle {id}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn an_empty_tree_hits_nothing() {
+        let bvh = build(&[], false);
+        let ray = Ray64 {
+            origin: DVec3::ZERO,
+            dir: DVec3::X,
+            t_min: 0.0,
+            t_max: f64::INFINITY,
+        };
+        assert_eq!(bvh.intersect(&ray), None);
+        assert_eq!(bvh.stats().triangles, 0);
+    }
+
+    #[test]
+    fn structure_holds_for_every_size() {
+        for n in [1usize, 2, 3, 4, 5, 8, 9, 33, 257, 5000] {
+            let tris = soup(n, n as u64, 0.05);
+            let bvh = build(&tris, false);
+            check_structure(&bvh, &tris);
+            assert_eq!(bvh.stats().triangles, n);
+            let flat = build(&tris, true);
+            assert_eq!(flat.stats().nodes, 0, "the flat loop is one leaf");
+        }
+    }
+
+    #[test]
+    fn coincident_centroids_split_by_median() {
+        // 100 copies of one triangle: SAH has no split, the object median
+        // keeps the leaves short.
+        let tris = vec![[Vec3::ZERO, Vec3::X, Vec3::Y]; 100];
+        let bvh = build(&tris, false);
+        check_structure(&bvh, &tris);
+        let ray = Ray64 {
+            origin: DVec3::new(0.2, 0.2, 1.0),
+            dir: -DVec3::Z,
+            t_min: 0.0,
+            t_max: f64::INFINITY,
+        };
+        let hit = bvh.intersect(&ray).expect("the ray meets the stack");
+        assert_eq!(hit.id, 0, "a tie goes to the lowest id");
+        let mut count = 0;
+        bvh.for_each_hit(&ray, |_, _| {
+            count += 1;
+            false
+        });
+        assert_eq!(count, 100);
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(24))]
+        #[test]
+        fn closest_hit_equals_the_linear_scan(
+            seed in 0u64..1000,
+            n in 1usize..400,
+            ox in -0.5f64..1.5, oy in -0.5f64..1.5, oz in -0.5f64..1.5,
+            dx in -1.0f64..1.0, dy in -1.0f64..1.0, dz in -1.0f64..1.0,
+        ) {
+            let d = DVec3::new(dx, dy, dz);
+            prop_assume!(d.length() > 1e-3);
+            let tris = soup(n, seed, 0.2);
+            let bvh = build(&tris, false);
+            let flat = build(&tris, true);
+            // A fan of rays from one origin: most meet something, the
+            // duplicated triangles make ties.
+            for k in 0..32u32 {
+                let jitter = DVec3::new(
+                    f64::from(k % 4),
+                    f64::from(k / 4 % 4),
+                    f64::from(k / 16),
+                ) * 0.07;
+                let ray = Ray64 {
+                    origin: DVec3::new(ox, oy, oz),
+                    dir: (d + jitter).normalize(),
+                    t_min: 0.0,
+                    t_max: f64::INFINITY,
+                };
+                let want = linear(&tris, &ray, bvh.reach(&ray));
+                let got = bvh.intersect(&ray).map(|h| (h.id, h.t64));
+                prop_assert_eq!(got, want);
+                prop_assert_eq!(flat.intersect(&ray).map(|h| (h.id, h.t64)), want);
+                let mut all = Vec::new();
+                bvh.for_each_hit(&ray, |id, _| {
+                    all.push(id);
+                    false
+                });
+                all.sort_unstable();
+                let pre = RayPrecomp::new(&ray, bvh.reach(&ray));
+                let (t_min, t_max) = pre.t_range();
+                let every: Vec<u32> = (0..u32::try_from(n).unwrap())
+                    .filter(|&id| intersect(&pre, &tris[id as usize], t_min, t_max).is_some())
+                    .collect();
+                prop_assert_eq!(all, every);
+            }
+        }
+    }
 }

@@ -8,8 +8,8 @@
 
 #![warn(missing_docs, missing_debug_implementations)]
 
-pub mod bvh;
-pub mod triangle;
+mod bvh;
+mod triangle;
 
 use bvh::Bvh;
 pub use bvh::{BvhHit, BvhStats};
@@ -19,6 +19,7 @@ use rendiff_core::math::{DVec3, Ray64, Vec3, to_f64};
 use rendiff_core::options::Geometry;
 use rendiff_core::shade::{ShadowQuery, Visibility};
 use rendiff_core::tri_scene::{Prim, TriScene};
+pub use triangle::TriHit;
 
 /// What an accelerator is built over.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -224,11 +225,7 @@ impl<'s> Accel<'s> {
     /// Calls `visit(triangle, hit)` for every triangle hit in
     /// `[ray.t_min, ray.t_max]` (analytic shapes excluded), in no particular
     /// order; stops when `visit` returns `true`.
-    pub fn for_each_triangle_hit(
-        &self,
-        ray: &Ray64,
-        visit: impl FnMut(u32, triangle::TriHit) -> bool,
-    ) {
+    pub fn for_each_triangle_hit(&self, ray: &Ray64, visit: impl FnMut(u32, TriHit) -> bool) {
         self.bvh.for_each_hit(ray, visit);
     }
 

@@ -70,7 +70,7 @@ const MIN_TRUSTED: f32 = 1e-30;
 /// Per-ray constants of the watertight test: the `f64` ray that decides,
 /// and the nearest `f32` ray that filters and walks the BVH.
 #[derive(Clone, Copy, Debug)]
-pub struct RayPrecomp {
+pub(crate) struct RayPrecomp {
     /// The `f32` ray nearest to the `f64` one (`t_min` rounded down,
     /// `t_max` up).
     pub ray: Ray,
@@ -98,7 +98,7 @@ impl RayPrecomp {
     /// farthest `t` at which the ray can still meet anything (it bounds the
     /// drift between the `f64` ray and its `f32` copy).
     #[must_use]
-    pub fn new(ray: &Ray64, t_bound: f64) -> RayPrecomp {
+    pub(crate) fn new(ray: &Ray64, t_bound: f64) -> RayPrecomp {
         let d = to_f32(ray.dir);
         let o = to_f32(ray.origin);
         let ad = d.abs();
@@ -147,7 +147,7 @@ impl RayPrecomp {
 
     /// The `f64` bounds of `t`.
     #[must_use]
-    pub fn t_range(&self) -> (f64, f64) {
+    pub(crate) fn t_range(&self) -> (f64, f64) {
         self.t64
     }
 }
@@ -157,7 +157,7 @@ impl RayPrecomp {
 /// runs of packs; `lanes` says how many lanes are triangles and `last`
 /// whether the leaf ends here.
 #[derive(Clone, Copy, Debug)]
-pub struct TriPack {
+pub(crate) struct TriPack {
     /// Corner coordinates, `v[corner][axis]`, a triangle per lane.
     pub v: [[Vec4; 3]; 3],
     /// Lanes in use (1 … 4).
@@ -168,7 +168,7 @@ pub struct TriPack {
 
 impl TriPack {
     /// An empty pack (no lanes).
-    pub const EMPTY: TriPack = TriPack {
+    pub(crate) const EMPTY: TriPack = TriPack {
         v: [[Vec4::ZERO; 3]; 3],
         lanes: 0,
         last: true,
@@ -177,13 +177,13 @@ impl TriPack {
     /// The triangle in `lane`.
     #[must_use]
     #[inline]
-    pub fn triangle(&self, lane: usize) -> [Vec3; 3] {
+    pub(crate) fn triangle(&self, lane: usize) -> [Vec3; 3] {
         self.v
             .map(|c| Vec3::new(c[0][lane], c[1][lane], c[2][lane]))
     }
 
     /// Puts a triangle in `lane`.
-    pub fn set(&mut self, lane: usize, tri: [Vec3; 3]) {
+    pub(crate) fn set(&mut self, lane: usize, tri: [Vec3; 3]) {
         for (corner, p) in tri.iter().enumerate() {
             self.v[corner][0][lane] = p.x;
             self.v[corner][1][lane] = p.y;
@@ -201,7 +201,7 @@ impl TriPack {
 /// [`intersect`].
 #[must_use]
 #[inline]
-pub fn candidates(pre: &RayPrecomp, pack: &TriPack) -> u32 {
+pub(crate) fn candidates(pre: &RayPrecomp, pack: &TriPack) -> u32 {
     let [kx, ky, kz] = pre.k;
     let [sx, sy] = pre.s4;
     let o = &pre.o4;
@@ -257,7 +257,7 @@ pub struct TriHit {
 #[must_use]
 #[inline]
 #[expect(clippy::similar_names, reason = "the paper's names")]
-pub fn intersect(pre: &RayPrecomp, v: &[Vec3; 3], t_min: f64, t_max: f64) -> Option<TriHit> {
+pub(crate) fn intersect(pre: &RayPrecomp, v: &[Vec3; 3], t_min: f64, t_max: f64) -> Option<TriHit> {
     let [kx, ky, kz] = pre.k;
     let [sx, sy, sz] = pre.s64;
     let o = pre.origin64;
@@ -335,8 +335,6 @@ pub(crate) fn f32_at_most(t: f64) -> f32 {
     let r = t as f32;
     if f64::from(r) > t { r.next_down() } else { r }
 }
-
-pub use rendiff_core::math::plane_barycentrics;
 
 #[cfg(test)]
 #[allow(
@@ -487,7 +485,9 @@ mod tests {
     fn plane_barycentrics_match() {
         use glam::DVec3;
         let v = [DVec3::ZERO, DVec3::X, DVec3::Y];
-        let (b, t) = plane_barycentrics(DVec3::new(0.2, 0.3, 2.0), -DVec3::Z, v).unwrap();
+        let (b, t) =
+            rendiff_core::math::plane_barycentrics(DVec3::new(0.2, 0.3, 2.0), -DVec3::Z, v)
+                .unwrap();
         assert!(
             (b[0] - 0.5).abs() < 1e-15 && (b[1] - 0.2).abs() < 1e-15 && (b[2] - 0.3).abs() < 1e-15
         );

@@ -23,7 +23,7 @@ pub(crate) struct HVert {
 impl HVert {
     /// Screen position (pixels).
     #[must_use]
-    pub fn screen(&self) -> (f64, f64) {
+    pub(crate) fn screen(&self) -> (f64, f64) {
         (self.xh / self.w, self.yh / self.w)
     }
 
@@ -43,7 +43,7 @@ impl HVert {
 
 /// A clip plane as a signed distance function (inside: ≥ 0).
 #[derive(Clone, Copy, Debug)]
-pub struct Plane {
+pub(crate) struct Plane {
     /// Coefficients on (xh, yh, w, z) and a constant.
     pub c: [f64; 5],
 }
@@ -83,7 +83,7 @@ pub(crate) fn clip_polygon(poly: &[HVert], plane: &Plane, out: &mut Vec<HVert>) 
 /// and the guard band `−g ≤ X ≤ width + g`, `−g ≤ Y ≤ height + g` (in
 /// homogeneous form, valid once `w > 0`).
 #[must_use]
-pub fn planes(near: f64, far: f64, width: f64, height: f64, g: f64) -> [Plane; 6] {
+pub(crate) fn planes(near: f64, far: f64, width: f64, height: f64, g: f64) -> [Plane; 6] {
     [
         Plane {
             c: [0.0, 0.0, 0.0, 1.0, -near],

@@ -26,9 +26,9 @@
 
 #![warn(missing_docs, missing_debug_implementations)]
 
-pub mod clip;
+mod clip;
 pub mod painter;
-pub mod shadow_map;
+mod shadow_map;
 
 use rayon::prelude::*;
 
@@ -883,4 +883,84 @@ fn shade_pass(
     frame.resolve();
     let maps = map.as_ref().map_or(0, shadow_map::ShadowMaps::count);
     (frame, shadow_rays, maps)
+}
+
+#[cfg(test)]
+mod tests {
+    //! The depth keys' contract: nearer is smaller in every format and
+    //! projection, the key range is the format's, and depths outside
+    //! [near, far] clamp instead of wrapping.
+    use super::*;
+
+    fn maps() -> Vec<DepthMap> {
+        let mut out = Vec::new();
+        for format in [DepthFormat::F32, DepthFormat::U24, DepthFormat::U16] {
+            for perspective in [true, false] {
+                out.push(DepthMap {
+                    format,
+                    perspective,
+                    near: 0.1,
+                    far: 100.0,
+                });
+            }
+        }
+        out
+    }
+
+    /// The stepped value the rasterizer interpolates at view depth `z`.
+    fn stepped(m: &DepthMap, z: f64) -> f64 {
+        if m.perspective { 1.0 / z } else { z }
+    }
+
+    #[test]
+    fn nearer_is_never_a_larger_key() {
+        for m in maps() {
+            let mut last = 0u32;
+            for k in 0..=10_000 {
+                let z = 0.1 + (100.0 - 0.1) * (f64::from(k) / 10_000.0).powi(3);
+                let key = m.key(stepped(&m, z));
+                assert!(key >= last, "{:?}: key falls at z = {z}", m.format);
+                last = key;
+            }
+        }
+    }
+
+    #[test]
+    fn keys_span_the_format_and_clamp() {
+        for m in maps() {
+            let near = m.key(stepped(&m, m.near));
+            let far = m.key(stepped(&m, m.far));
+            let before = m.key(stepped(&m, m.near * 0.5));
+            let beyond = m.key(stepped(&m, m.far * 2.0));
+            match m.format.max_key() {
+                Some(max) => {
+                    assert_eq!(near, 0, "{:?}", m.format);
+                    // The largest key is kept free: max − 1 is the farthest.
+                    assert_eq!(f64::from(far), max - 1.0, "{:?}", m.format);
+                    assert_eq!(before, 0);
+                    assert_eq!(beyond, far);
+                }
+                None => {
+                    assert!(near < far && before <= near && beyond >= far);
+                    assert!(beyond < u32::MAX, "u32::MAX stays the empty key");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn f32_keys_resolve_a_relative_step_of_a_few_ulps() {
+        // Reversed-Z f32 keeps ~2^-23 relative resolution at every depth
+        // in perspective: depths 4 ulps of f32 apart get different keys.
+        let m = DepthMap {
+            format: DepthFormat::F32,
+            perspective: true,
+            near: 0.1,
+            far: 1e4,
+        };
+        for z in [0.2, 3.0, 70.0, 5000.0] {
+            let dz = z * 4.0 * f64::from(f32::EPSILON);
+            assert!(m.key(1.0 / z) < m.key(1.0 / (z + dz)), "z = {z}");
+        }
+    }
 }

@@ -154,13 +154,13 @@ pub(crate) struct ShadowMaps {
 impl ShadowMaps {
     /// How many maps were rendered.
     #[must_use]
-    pub fn count(&self) -> usize {
+    pub(crate) fn count(&self) -> usize {
         self.maps.iter().map(Vec::len).sum()
     }
 
     /// Renders the maps at `res`×`res` texels each.
     #[must_use]
-    pub fn new(scene: &TriScene, res: u32) -> ShadowMaps {
+    pub(crate) fn new(scene: &TriScene, res: u32) -> ShadowMaps {
         let casters: Vec<u32> = (0..u32::try_from(scene.len()).unwrap_or(0))
             .filter(|&t| {
                 let o = &scene.objects[scene.tri_object[t as usize] as usize];

@@ -309,3 +309,110 @@ impl Tracer<'_, '_> {
         c
     }
 }
+
+#[cfg(test)]
+mod tests {
+    //! The ray tree's counting rules on scenes where every ray's path is
+    //! known: POV-Ray's trace level, the straight continuations that do
+    //! not use it up, and their bound.
+    use super::*;
+    use rendiff_accel::AccelOptions;
+    use rendiff_core::camera::{Camera, Projection};
+    use rendiff_core::frame::BACKGROUND;
+    use rendiff_core::math::{DVec3, Vec3};
+
+    /// Square sheets parallel to z = 0 at the given heights, each two
+    /// triangles wider than the view.
+    fn sheets(zs: &[f32]) -> Vec<[Vec3; 3]> {
+        let mut out = Vec::new();
+        for &z in zs {
+            let (a, b, c, d) = (
+                Vec3::new(-4.0, -4.0, z),
+                Vec3::new(4.0, -4.0, z),
+                Vec3::new(4.0, 4.0, z),
+                Vec3::new(-4.0, 4.0, z),
+            );
+            out.push([a, b, c]);
+            out.push([a, c, d]);
+        }
+        out
+    }
+
+    /// A 4×4 orthographic view from z = `eye_z` down the −z axis.
+    fn camera(eye_z: f64) -> Camera {
+        Camera::new(
+            DVec3::new(0.0, 0.0, eye_z),
+            DVec3::new(0.0, 0.0, eye_z - 1.0),
+            DVec3::Y,
+            Projection::Orthographic { view_height: 1.0 },
+            4,
+            4,
+            1,
+            1e-3,
+            100.0,
+        )
+        .unwrap()
+    }
+
+    fn render(scene: &TriScene, max_depth: u32) -> (Frame, RayStats) {
+        let accel = Accel::new(scene, AccelOptions::default());
+        let opts = RayOptions {
+            max_depth,
+            shadows: false,
+            gate_eps: 0.0,
+        };
+        render_counted(&accel, &opts)
+    }
+
+    #[test]
+    fn two_facing_mirrors_stop_at_the_trace_level() {
+        // The eye between mirrors at z = 0 and z = 2: every primary ray
+        // bounces until its level reaches max_depth, so each of the 16
+        // samples adds max_depth − 1 secondary rays (the seed's 2ⁿ − 1
+        // tree with one branch per node).
+        let mut scene = TriScene::from_triangles(camera(1.0), &sheets(&[0.0, 2.0]));
+        scene.materials[0].reflection = 1.0;
+        for max_depth in [1, 2, 5, 9] {
+            let (frame, stats) = render(&scene, max_depth);
+            assert_eq!(stats.primary, 16);
+            assert_eq!(
+                stats.secondary,
+                16 * u64::from(max_depth - 1),
+                "max_depth {max_depth}"
+            );
+            assert!(frame.id.iter().all(|&id| id != BACKGROUND));
+        }
+    }
+
+    #[test]
+    fn straight_continuations_keep_the_level_and_are_bounded() {
+        // Clear ior-1 sheets: a ray goes on straight through each without
+        // using up its level. Through 10 sheets a primary ray spawns 10
+        // continuations (the last meets the background); through 100 it
+        // stops after MAX_STRAIGHT.
+        for (n, per_sample) in [(10u16, 10u64), (100, u64::from(MAX_STRAIGHT))] {
+            let zs: Vec<f32> = (0..n).map(|k| -f32::from(k) * 0.01).collect();
+            let mut scene = TriScene::from_triangles(camera(1.0), &sheets(&zs));
+            scene.materials[0].transmit = 1.0;
+            scene.materials[0].ior = 1.0;
+            let (_, stats) = render(&scene, 2);
+            assert_eq!(stats.secondary, 16 * per_sample, "{n} sheets");
+            // With max_depth 1 there is no ray tree at all.
+            let (_, flat) = render(&scene, 1);
+            assert_eq!(flat.secondary, 0);
+        }
+    }
+
+    #[test]
+    fn a_missed_sample_is_the_background() {
+        let mut scene = TriScene::from_triangles(camera(1.0), &sheets(&[5.0]));
+        scene.background = Rgb::new(0.25, 0.5, 0.75);
+        let (frame, stats) = render(&scene, 5);
+        assert_eq!(stats.secondary, 0);
+        for i in 0..frame.id.len() {
+            assert_eq!(frame.id[i], BACKGROUND);
+            assert_eq!(frame.depth[i], f32::INFINITY);
+            assert_eq!(frame.sample_colors()[i], scene.background);
+        }
+    }
+}
