@@ -586,160 +586,170 @@ fn base_overrides(opts: &BenchOptions) -> Overrides {
     }
 }
 
+/// One setting a sweep varies, applied to a case.
+#[derive(Clone, Copy, Debug)]
+enum Knob {
+    Tessellation(f64),
+    Analytic,
+    Samples(u32),
+    Depth(DepthFormat),
+    Shadows(ShadowMode),
+    MaxDepth(u32),
+    Plan(bool),
+    Threads(usize),
+}
+
+impl Knob {
+    /// The setting's column in the CSV.
+    fn label(self) -> String {
+        match self {
+            Knob::Tessellation(e) => format!("{e}"),
+            Knob::Analytic => "analytic".into(),
+            Knob::Samples(n) => format!("{n}x{n}"),
+            Knob::Depth(d) => d.to_string(),
+            Knob::Shadows(m) => m.to_string(),
+            Knob::MaxDepth(d) => d.to_string(),
+            Knob::Plan(on) => if on { "on" } else { "off" }.into(),
+            Knob::Threads(n) => n.to_string(),
+        }
+    }
+
+    fn apply(self, c: &mut Case) {
+        match self {
+            Knob::Tessellation(e) => c.tessellation_error = Some(e),
+            Knob::Analytic => c.ov.geometry = Some(Geometry::Analytic),
+            Knob::Samples(n) => c.ov.samples = Some(n),
+            Knob::Depth(d) => c.ov.depth = Some(d),
+            Knob::Shadows(m) => c.ov.shadows = Some(m),
+            Knob::MaxDepth(d) => c.ov.max_depth = Some(d),
+            Knob::Plan(on) => c.ov.no_plan = !on,
+            Knob::Threads(n) => c.threads = Some(n),
+        }
+    }
+}
+
 /// Every case of a scene, sweep by sweep.
 fn cases(scene: &Scene, base: &Prepared, opts: &BenchOptions) -> Vec<Case> {
     let mut out = Vec::new();
-    let both = [Backend::Raster, Backend::Ray];
-    let mut push = |backend, sweep, setting: String, f: &dyn Fn(&mut Case), reference| {
-        let mut c = Case {
-            backend,
-            sweep,
-            setting,
-            ov: base_overrides(opts),
-            tessellation_error: None,
-            threads: None,
-            reference,
-        };
-        f(&mut c);
-        out.push(c);
+    for &sweep in &opts.sweeps {
+        for (backend, knob, reference) in sweep_knobs(sweep, scene, base, opts) {
+            let mut c = Case {
+                backend,
+                sweep,
+                setting: knob.label(),
+                ov: base_overrides(opts),
+                tessellation_error: None,
+                threads: None,
+                reference,
+            };
+            knob.apply(&mut c);
+            out.push(c);
+        }
+    }
+    out
+}
+
+/// The (backend, setting, reference) triples of one sweep; none where the
+/// scene has nothing for it to vary (no curved surface to tessellate, no
+/// shadow, no ray tree).
+fn sweep_knobs(
+    sweep: Sweep,
+    scene: &Scene,
+    base: &Prepared,
+    opts: &BenchOptions,
+) -> Vec<(Backend, Knob, RefKind)> {
+    const BOTH: [Backend; 2] = [Backend::Raster, Backend::Ray];
+    let each = |knobs: Vec<Knob>, backends: &[Backend], r: RefKind| {
+        knobs
+            .into_iter()
+            .flat_map(|k| backends.iter().map(move |&b| (b, k, r)))
+            .collect::<Vec<_>>()
     };
+    let quick = opts.quick;
     let curved = scene.objects.iter().any(|o| {
         o.tessellation.is_none()
             && matches!(o.shape, Shape::Sphere { .. } | Shape::Superellipsoid { .. })
     });
-    let pick = |all: &[f64], quick: &[f64]| -> Vec<f64> {
-        if opts.quick {
-            quick.to_vec()
-        } else {
-            all.to_vec()
+    match sweep {
+        Sweep::Tessellation if curved => {
+            let errors: &[f64] = if quick { &[2.0, 0.25] } else { &TESSELLATION };
+            let mut out = each(
+                errors.iter().map(|&e| Knob::Tessellation(e)).collect(),
+                &BOTH,
+                RefKind::Surface,
+            );
+            // The ray tracer can skip tessellation altogether.
+            out.push((Backend::Ray, Knob::Analytic, RefKind::Surface));
+            out
         }
-    };
-    for sweep in &opts.sweeps {
-        match sweep {
-            Sweep::Tessellation if curved => {
-                for e in pick(&TESSELLATION, &[2.0, 0.25]) {
-                    for b in both {
-                        push(
-                            b,
-                            *sweep,
-                            format!("{e}"),
-                            &|c| c.tessellation_error = Some(e),
-                            RefKind::Surface,
-                        );
-                    }
-                }
-                // The ray tracer can skip tessellation altogether.
-                push(
-                    Backend::Ray,
-                    *sweep,
-                    "analytic".into(),
-                    &|c| c.ov.geometry = Some(Geometry::Analytic),
-                    RefKind::Surface,
-                );
-            }
-            Sweep::Samples => {
-                for n in pick(&[1.0, 2.0, 4.0], &[1.0, 2.0]) {
-                    #[expect(
-                        clippy::cast_possible_truncation,
-                        clippy::cast_sign_loss,
-                        reason = "small integral sample counts"
-                    )]
-                    let n = n as u32;
-                    for b in both {
-                        push(
-                            b,
-                            *sweep,
-                            format!("{n}x{n}"),
-                            &|c| c.ov.samples = Some(n),
-                            RefKind::Converged,
-                        );
-                    }
-                }
-            }
-            Sweep::Depth => {
-                let formats: &[DepthFormat] = if opts.quick {
-                    &[DepthFormat::F32, DepthFormat::U16]
-                } else {
-                    &[DepthFormat::F32, DepthFormat::U24, DepthFormat::U16]
-                };
-                for &d in formats {
-                    push(
-                        Backend::Raster,
-                        *sweep,
-                        d.to_string(),
-                        &|c| c.ov.depth = Some(d),
-                        RefKind::Main,
-                    );
-                }
-            }
-            Sweep::Shadows if base.plan.shadows => {
-                let modes: &[ShadowMode] = if opts.quick {
-                    &[ShadowMode::Rays, ShadowMode::Map(256)]
-                } else {
-                    &[
-                        ShadowMode::Rays,
-                        ShadowMode::Map(256),
-                        ShadowMode::Map(1024),
-                        ShadowMode::Map(4096),
-                    ]
-                };
-                for &m in modes {
-                    push(
-                        Backend::Raster,
-                        *sweep,
-                        m.to_string(),
-                        &|c| c.ov.shadows = Some(m),
-                        RefKind::Main,
-                    );
-                }
-            }
-            Sweep::MaxDepth if base.plan.ray_tree => {
-                let top = base.settings.max_depth;
-                let mut depths: Vec<u32> =
-                    [1, 2, 3, 5, 8].into_iter().filter(|&d| d < top).collect();
-                depths.push(top);
-                if opts.quick {
-                    depths = vec![1, top];
-                }
-                for d in depths {
-                    push(
-                        Backend::Ray,
-                        *sweep,
-                        d.to_string(),
-                        &|c| c.ov.max_depth = Some(d),
-                        RefKind::Main,
-                    );
-                }
-            }
-            Sweep::Plan => {
-                for b in both {
-                    push(b, *sweep, "on".into(), &|_| {}, RefKind::Main);
-                    push(
-                        b,
-                        *sweep,
-                        "off".into(),
-                        &|c| c.ov.no_plan = true,
-                        RefKind::Main,
-                    );
-                }
-            }
-            Sweep::Threads => {
-                for &n in &opts.threads {
-                    for b in both {
-                        push(
-                            b,
-                            *sweep,
-                            n.to_string(),
-                            &|c| c.threads = Some(n),
-                            RefKind::Main,
-                        );
-                    }
-                }
-            }
-            Sweep::Tessellation | Sweep::Shadows | Sweep::MaxDepth => {}
+        Sweep::Samples => {
+            let ns: &[u32] = if quick { &[1, 2] } else { &[1, 2, 4] };
+            each(
+                ns.iter().map(|&n| Knob::Samples(n)).collect(),
+                &BOTH,
+                RefKind::Converged,
+            )
         }
+        Sweep::Depth => {
+            let formats: &[DepthFormat] = if quick {
+                &[DepthFormat::F32, DepthFormat::U16]
+            } else {
+                &[DepthFormat::F32, DepthFormat::U24, DepthFormat::U16]
+            };
+            each(
+                formats.iter().map(|&d| Knob::Depth(d)).collect(),
+                &[Backend::Raster],
+                RefKind::Main,
+            )
+        }
+        Sweep::Shadows if base.plan.shadows => {
+            let modes: &[ShadowMode] = if quick {
+                &[ShadowMode::Rays, ShadowMode::Map(256)]
+            } else {
+                &[
+                    ShadowMode::Rays,
+                    ShadowMode::Map(256),
+                    ShadowMode::Map(1024),
+                    ShadowMode::Map(4096),
+                ]
+            };
+            each(
+                modes.iter().map(|&m| Knob::Shadows(m)).collect(),
+                &[Backend::Raster],
+                RefKind::Main,
+            )
+        }
+        Sweep::MaxDepth if base.plan.ray_tree => {
+            let top = base.settings.max_depth;
+            let depths: Vec<u32> = if quick {
+                vec![1, top]
+            } else {
+                let mut d: Vec<u32> = [1, 2, 3, 5, 8].into_iter().filter(|&d| d < top).collect();
+                d.push(top);
+                d
+            };
+            each(
+                depths.into_iter().map(Knob::MaxDepth).collect(),
+                &[Backend::Ray],
+                RefKind::Main,
+            )
+        }
+        Sweep::Plan => BOTH
+            .iter()
+            .flat_map(|&b| {
+                [
+                    (b, Knob::Plan(true), RefKind::Main),
+                    (b, Knob::Plan(false), RefKind::Main),
+                ]
+            })
+            .collect(),
+        Sweep::Threads => each(
+            opts.threads.iter().map(|&n| Knob::Threads(n)).collect(),
+            &BOTH,
+            RefKind::Main,
+        ),
+        Sweep::Tessellation | Sweep::Shadows | Sweep::MaxDepth => Vec::new(),
     }
-    out
 }
 
 /// Writes `results.csv` (atomically).

@@ -457,48 +457,16 @@ fn progress_bar(len: usize) -> indicatif::ProgressBar {
 
 fn diff(a: &DiffArgs) -> Result<Outcome> {
     use rendiff::compare::report::index_html;
-    use rendiff::diff::{self, Side};
-    let side_a = Side::parse(&a.a).map_err(|e| anyhow::anyhow!("--a: {e}"))?;
-    let side_b = match Side::parse(&a.b).map_err(|e| anyhow::anyhow!("--b: {e}"))? {
-        Side::Pov { .. } => Side::Pov {
-            golden_dir: a.golden_dir.clone(),
-            render: a.render,
-        },
-        other => other,
-    };
+    use rendiff::diff;
     let ov = overrides(&a.flags)?;
-    if ov.geometry == Some(Geometry::Analytic) {
-        for (flag, side) in [("--a", &side_a), ("--b", &side_b)] {
-            if let Side::Backend(b) = side
-                && *b != Backend::Ray
-            {
-                bail!(
-                    "--geometry analytic: only the ray tracer renders analytic shapes ({flag} is {b})"
-                );
-            }
-        }
-    }
+    let (side_a, side_b) = diff_sides(a, &ov)?;
     // Load every scene first: bad input fails before any work or output.
     let jobs: Vec<(String, Prepared)> = a
         .scenes
         .iter()
         .map(|p| Ok((p.display().to_string(), Prepared::load(p, &ov)?)))
         .collect::<Result<_>>()?;
-    // What the request reads, which no output may replace.
-    let mut inputs: Vec<PathBuf> = jobs
-        .iter()
-        .flat_map(|(_, job)| job.scene.input_files())
-        .collect();
-    for side in [&side_a, &side_b] {
-        match side {
-            Side::Image(p) => inputs.push(p.clone()),
-            Side::Pov {
-                golden_dir,
-                render: false,
-            } => inputs.push(golden_dir.clone()),
-            _ => {}
-        }
-    }
+    let inputs = diff_inputs(&jobs, [&side_a, &side_b]);
     let several = jobs.len() > 1;
     let folders = rendiff::output::scene_folders(&a.scenes);
     // The --out set is written into a fresh folder and swapped in whole.
@@ -507,13 +475,17 @@ fn diff(a: &DiffArgs) -> Result<Outcome> {
         .as_ref()
         .map(|dir| rendiff::output::OutputDir::begin(dir, &inputs))
         .transpose()?;
-    if let Some(gb) = &a.flags.gbuffer {
-        for (k, _) in jobs.iter().enumerate() {
-            let base = if several {
+    let gbuffer_base = |k: usize| {
+        a.flags.gbuffer.as_ref().map(|gb| {
+            if several {
                 gb.join(&folders[k])
             } else {
                 gb.clone()
-            };
+            }
+        })
+    };
+    for k in 0..jobs.len() {
+        if let Some(base) = gbuffer_base(k) {
             for side in ["a", "b"] {
                 for f in rendiff::frame::GBUFFER_FILES {
                     refuse_inputs(&base.join(side).join(f), &inputs)?;
@@ -525,12 +497,7 @@ fn diff(a: &DiffArgs) -> Result<Outcome> {
     let mut entries = Vec::new();
     for (k, (label, job)) in jobs.iter().enumerate() {
         let r = diff::diff(job, label, &side_a, &side_b)?;
-        if let Some(gb) = &a.flags.gbuffer {
-            let base = if several {
-                gb.join(&folders[k])
-            } else {
-                gb.clone()
-            };
+        if let Some(base) = gbuffer_base(k) {
             for (side, out) in [("a", &r.a), ("b", &r.b)] {
                 if let diff::Output::Frame(f, _) = out {
                     f.write_gbuffer(&base.join(side))?;
@@ -582,6 +549,53 @@ fn diff(a: &DiffArgs) -> Result<Outcome> {
             Outcome::Differs
         },
     )
+}
+
+/// The two sides of `diff` as asked for (`--b pov` takes the golden folder
+/// and `--render`); analytic geometry only where both sides can draw it.
+fn diff_sides(a: &DiffArgs, ov: &Overrides) -> Result<(rendiff::diff::Side, rendiff::diff::Side)> {
+    use rendiff::diff::Side;
+    let side_a = Side::parse(&a.a).map_err(|e| anyhow::anyhow!("--a: {e}"))?;
+    let side_b = match Side::parse(&a.b).map_err(|e| anyhow::anyhow!("--b: {e}"))? {
+        Side::Pov { .. } => Side::Pov {
+            golden_dir: a.golden_dir.clone(),
+            render: a.render,
+        },
+        other => other,
+    };
+    if ov.geometry == Some(Geometry::Analytic) {
+        for (flag, side) in [("--a", &side_a), ("--b", &side_b)] {
+            if let Side::Backend(b) = side
+                && *b != Backend::Ray
+            {
+                bail!(
+                    "--geometry analytic: only the ray tracer renders analytic shapes ({flag} is {b})"
+                );
+            }
+        }
+    }
+    Ok((side_a, side_b))
+}
+
+/// What a `diff` request reads (scenes, their meshes and textures, a
+/// `--b` image, a stored golden folder), which no output may replace.
+fn diff_inputs(jobs: &[(String, Prepared)], sides: [&rendiff::diff::Side; 2]) -> Vec<PathBuf> {
+    use rendiff::diff::Side;
+    let mut inputs: Vec<PathBuf> = jobs
+        .iter()
+        .flat_map(|(_, job)| job.scene.input_files())
+        .collect();
+    for side in sides {
+        match side {
+            Side::Image(p) => inputs.push(p.clone()),
+            Side::Pov {
+                golden_dir,
+                render: false,
+            } => inputs.push(golden_dir.clone()),
+            _ => {}
+        }
+    }
+    inputs
 }
 
 /// Runs `f` on a pool of `threads` workers (all cores when `None`); at

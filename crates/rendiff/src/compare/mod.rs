@@ -266,38 +266,11 @@ pub fn compare_frames(
     );
     let oracle = Oracle::new(scene, depth);
     let (sw, sh) = (a.sample_width(), a.sample_height());
-    let cam = &scene.camera;
     let per_row: Vec<Vec<SampleVerdict>> = (0..sh)
         .into_par_iter()
         .map(|sy| {
             (0..sw)
-                .map(|sx| {
-                    let i = (sy as usize) * (sw as usize) + sx as usize;
-                    let (ia, ib) = (a.id[i], b.id[i]);
-                    let opt = |id: u32| (id != BACKGROUND).then_some(id);
-                    if ia != ib {
-                        let (x, y) = cam.sample_point(sx, sy);
-                        let j = oracle.judge(x, y, opt(ia), opt(ib));
-                        return (j.class, f32::NAN, false, Some(j));
-                    }
-                    let class = Class::Agree;
-                    let err = sample_error(a.sample_colors()[i], b.sample_colors()[i]);
-                    let (fa, fb) = (a.flags[i], b.flags[i]);
-                    let mut tie = (fa | fb) & FLAG_DISCONTINUITY != 0;
-                    let shadow_diff = (fa ^ fb) & !FLAG_DISCONTINUITY;
-                    if !tie && shadow_diff != 0 {
-                        // A shadow edge each frame places differently by a
-                        // sample: both frames show an edge of that light's
-                        // shadow here. (Where only one does, a shadow is
-                        // missing or added — a shadow map that loses thin
-                        // occluders — and the sample is compared as usual.)
-                        tie = (0..31).filter(|k| shadow_diff & (2 << k) != 0).all(|k| {
-                            let mask = 2u32 << k;
-                            on_boundary(a, sx, sy, mask) && on_boundary(b, sx, sy, mask)
-                        });
-                    }
-                    (class, err, tie, None)
-                })
+                .map(|sx| judge_sample(&oracle, a, b, sx, sy))
                 .collect()
         })
         .collect();
@@ -305,64 +278,20 @@ pub fn compare_frames(
     let mut classes = Vec::with_capacity((sw as usize) * (sh as usize));
     let mut errors = Vec::with_capacity(classes.capacity());
     let mut ties = Vec::with_capacity(classes.capacity());
-    let (mut n, mut sum, mut sq, mut max, mut over) = (0u64, 0.0f64, 0.0f64, 0.0f64, 0u64);
-    let (mut n_ties, mut tie_max) = (0u64, 0.0f64);
     let (mut edges, mut depths, mut nears) = (Vec::new(), Vec::new(), Vec::new());
-    for row in per_row {
-        for (class, err, tie, judged) in row {
-            if let Some(j) = judged {
-                edges.push(j.edge_px);
-                nears.push(j.clip);
-                depths.extend(j.depth_rel);
-            }
-            vis.add(class);
-            classes.push(class);
-            errors.push(err);
-            ties.push(tie);
-            if class != Class::Agree {
-                continue;
-            }
-            let e = f64::from(err);
-            if tie {
-                n_ties += 1;
-                tie_max = tie_max.max(e);
-                continue;
-            }
-            n += 1;
-            sum += e;
-            max = max.max(e);
-            if e > tol.shading_max {
-                over += 1;
-            }
+    for (class, err, tie, judged) in per_row.into_iter().flatten() {
+        if let Some(j) = judged {
+            edges.push(j.edge_px);
+            nears.push(j.clip);
+            depths.extend(j.depth_rel);
         }
+        vis.add(class);
+        classes.push(class);
+        errors.push(err);
+        ties.push(tie);
     }
-    // RMSE over all channels of the agreeing, non-tie samples.
-    for (i, (&c, &t)) in classes.iter().zip(&ties).enumerate() {
-        if c == Class::Agree && !t {
-            let (p, q) = (
-                a.sample_colors()[i].clamp01(),
-                b.sample_colors()[i].clamp01(),
-            );
-            for (x, y) in p.to_array().iter().zip(q.to_array()) {
-                sq += f64::from(x - y).powi(2);
-            }
-        }
-    }
-    #[expect(clippy::cast_precision_loss, reason = "sample counts below 2^52")]
-    let (mean, rmse) = if n == 0 {
-        (0.0, 0.0)
-    } else {
-        (sum / n as f64, (sq / (3 * n) as f64).sqrt())
-    };
-    let shading = ShadingStats {
-        max,
-        mean,
-        rmse,
-        psnr: metrics::psnr(rmse),
-        over_threshold: over,
-        ties: Some(n_ties),
-        tie_max: Some(tie_max),
-    };
+    let shading = shading_stats(a, b, &classes, &errors, &ties, tol);
+    let over = shading.over_threshold;
     let image = metrics::image_stats(a.width, a.height, &a.color, &b.color);
     let pass = vis.real == 0 && vis.unjudgeable == 0 && over == 0;
     let judged = JudgedTolerances {
@@ -382,6 +311,89 @@ pub fn compare_frames(
         samples: a.samples,
         judged: Some(judged),
         pass,
+    }
+}
+
+/// One sample of two frames: where the ids differ, the oracle's verdict;
+/// where they agree, the colour error and whether the sample is a tie (a
+/// discontinuity, or a shadow edge both frames place within a sample).
+fn judge_sample(oracle: &Oracle<'_>, a: &Frame, b: &Frame, sx: u32, sy: u32) -> SampleVerdict {
+    let i = (sy as usize) * (a.sample_width() as usize) + sx as usize;
+    let (ia, ib) = (a.id[i], b.id[i]);
+    let opt = |id: u32| (id != BACKGROUND).then_some(id);
+    if ia != ib {
+        let (x, y) = oracle.camera().sample_point(sx, sy);
+        let j = oracle.judge(x, y, opt(ia), opt(ib));
+        return (j.class, f32::NAN, false, Some(j));
+    }
+    let err = sample_error(a.sample_colors()[i], b.sample_colors()[i]);
+    let (fa, fb) = (a.flags[i], b.flags[i]);
+    let mut tie = (fa | fb) & FLAG_DISCONTINUITY != 0;
+    let shadow_diff = (fa ^ fb) & !FLAG_DISCONTINUITY;
+    if !tie && shadow_diff != 0 {
+        // A shadow edge each frame places differently by a sample: both
+        // frames show an edge of that light's shadow here. (Where only one
+        // does, a shadow is missing or added — a shadow map that loses
+        // thin occluders — and the sample is compared as usual.)
+        tie = (0..31).filter(|k| shadow_diff & (2 << k) != 0).all(|k| {
+            let mask = 2u32 << k;
+            on_boundary(a, sx, sy, mask) && on_boundary(b, sx, sy, mask)
+        });
+    }
+    (Class::Agree, err, tie, None)
+}
+
+/// The shading statistics over the agreeing samples: ties apart (their
+/// count and largest error), the rest against `tol.shading_max`.
+fn shading_stats(
+    a: &Frame,
+    b: &Frame,
+    classes: &[Class],
+    errors: &[f32],
+    ties: &[bool],
+    tol: &Tolerances,
+) -> ShadingStats {
+    let (mut n, mut sum, mut sq, mut max, mut over) = (0u64, 0.0f64, 0.0f64, 0.0f64, 0u64);
+    let (mut n_ties, mut tie_max) = (0u64, 0.0f64);
+    for (i, ((&class, &err), &tie)) in classes.iter().zip(errors).zip(ties).enumerate() {
+        if class != Class::Agree {
+            continue;
+        }
+        let e = f64::from(err);
+        if tie {
+            n_ties += 1;
+            tie_max = tie_max.max(e);
+            continue;
+        }
+        n += 1;
+        sum += e;
+        max = max.max(e);
+        if e > tol.shading_max {
+            over += 1;
+        }
+        // RMSE over all channels of the agreeing, non-tie samples.
+        let (p, q) = (
+            a.sample_colors()[i].clamp01(),
+            b.sample_colors()[i].clamp01(),
+        );
+        for (x, y) in p.to_array().iter().zip(q.to_array()) {
+            sq += f64::from(x - y).powi(2);
+        }
+    }
+    #[expect(clippy::cast_precision_loss, reason = "sample counts below 2^52")]
+    let (mean, rmse) = if n == 0 {
+        (0.0, 0.0)
+    } else {
+        (sum / n as f64, (sq / (3 * n) as f64).sqrt())
+    };
+    ShadingStats {
+        max,
+        mean,
+        rmse,
+        psnr: metrics::psnr(rmse),
+        over_threshold: over,
+        ties: Some(n_ties),
+        tie_max: Some(tie_max),
     }
 }
 

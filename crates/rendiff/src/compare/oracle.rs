@@ -186,6 +186,11 @@ impl<'a> Oracle<'a> {
         }
     }
 
+    /// The camera the oracle judges with (the scene's).
+    pub(crate) fn camera(&self) -> &Camera {
+        &self.cam
+    }
+
     /// The same oracle for a frame rendered from vertices that differ from
     /// this scene's by up to `px` pixels (a scaled or moved copy of the
     /// scene, rounded to f32 anew): every triangle's position error grows
