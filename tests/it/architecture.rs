@@ -95,7 +95,10 @@ const ALLOWED: &[(&str, &[&str])] = &[
     ("budget", &[]),
     ("cleanup", &[]),
     ("escape", &[]),
-    ("texture", &["budget", "color", "image_io", "input", "math"]),
+    (
+        "texture",
+        &["budget", "color", "image_io", "input", "math", "options"],
+    ),
     ("image_io", &["budget", "cleanup", "color", "input"]),
     ("output", &["cleanup", "image_io"]),
     ("camera", &["coverage", "math"]),
@@ -148,7 +151,15 @@ const ALLOWED: &[(&str, &[&str])] = &[
     ),
     (
         "ray",
-        &["accel", "color", "frame", "math", "shade", "tri_scene"],
+        &[
+            "accel",
+            "camera",
+            "color",
+            "frame",
+            "math",
+            "shade",
+            "tri_scene",
+        ],
     ),
     (
         "compare",

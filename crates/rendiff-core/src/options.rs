@@ -36,7 +36,7 @@ macro_rules! parse_error {
 
 /// The largest side of every raster rendiff makes or reads: the image
 /// (DESIGN.md §4), a texture, a shadow map. In the 1/256-pixel fixed
-/// point of [`crate::coverage`] a coordinate stays below 2^22 (edge
+/// point of the coverage rule a coordinate stays below 2^22 (edge
 /// products far inside i64), and a texel coordinate is exact in f32.
 pub const MAX_SIDE: u32 = 16_384;
 
