@@ -38,6 +38,8 @@ mod painter;
 mod plan;
 /// Both backends against the stored POV-Ray references.
 mod povray;
+/// Comparing with 8-bit and 16-bit PNGs: their rounding is not a difference.
+mod quantised;
 /// The rasterizer: exact coverage, drift, depth formats, near clipping.
 mod raster;
 /// The ray tracer: BVH, watertightness, self-hits, threads, shading.

@@ -145,9 +145,9 @@ pub(crate) fn srgb_encode(v: f32) -> f32 {
     }
 }
 
-/// sRGB decoding to a linear value.
+/// sRGB decoding of an encoded value in [0, 1] to a linear value.
 #[must_use]
-pub(crate) fn srgb_decode(v: f32) -> f32 {
+pub fn srgb_decode(v: f32) -> f32 {
     if v <= 0.040_45 {
         v / 12.92
     } else {

@@ -99,6 +99,14 @@ impl Output {
         }
     }
 
+    fn quantisation(&self) -> compare::Quantisation {
+        match self {
+            Output::Frame(..) => compare::Quantisation::Exact,
+            Output::Image { linear16: true, .. } => compare::Quantisation::Linear16,
+            Output::Image { .. } => compare::Quantisation::Srgb8,
+        }
+    }
+
     fn time(&self) -> Option<f64> {
         match self {
             Output::Frame(_, t) => Some(*t),
@@ -179,6 +187,12 @@ pub fn tolerances(job: &Prepared) -> Result<(Tolerances, ImageTolerances), Error
         }
         it.pov_fraction = v.value;
     }
+    // The user's own rule: may be looser than the derived one (it is
+    // reported as theirs).
+    it.fuzzy = s.fuzzy.map(|f| compare::Fuzzy {
+        max_diff: f.max_diff,
+        pixels: f.pixels,
+    });
     Ok((t, it))
 }
 
@@ -269,13 +283,110 @@ fn produce(job: &Prepared, side: &Side, max_depth: u32) -> Result<(Output, Optio
     Ok((out, None))
 }
 
+/// Compares two images with no scene (`rendiff diff A.png B.png`): pixel
+/// by pixel, beyond each image's rounding (8-bit sRGB or 16-bit linear);
+/// the verdict passes when no pixel differs, or within the user's `fuzzy`
+/// rule. Each image is refused before decoding when its header claims
+/// more than `budget` allows, and `b` must have `a`'s size.
+///
+/// # Errors
+///
+/// [`Error::Image`] for an unreadable image or a size mismatch (naming
+/// the file and both sizes).
+pub fn diff_images(
+    a: &Path,
+    b: &Path,
+    fuzzy: Option<compare::Fuzzy>,
+    budget: &crate::budget::Budget,
+) -> Result<DiffResult, Error> {
+    let image = |img: image_io::LinearImage| Output::Image {
+        width: img.width,
+        height: img.height,
+        pixels: img.pixels,
+        linear16: img.linear16,
+        rendered_ms: None,
+    };
+    let img_a = image_io::read_png_linear_within(a, None, budget)?;
+    let (width, height) = (img_a.width, img_a.height);
+    let out_a = image(img_a);
+    let out_b = image(image_io::read_png_linear_within(
+        b,
+        Some((width, height)),
+        budget,
+    )?);
+    let tol = compare::image_tolerances();
+    let image_tol = ImageTolerances {
+        fuzzy,
+        rule: compare::ImageRule::SameFrame,
+        ..ImageTolerances::default()
+    };
+    let comparison = compare::compare_images(
+        width,
+        height,
+        (out_a.pixels(), out_b.pixels()),
+        [out_a.quantisation(), out_b.quantisation()],
+        &image_tol,
+        tol.shading_max,
+    );
+    let mut notes = Vec::new();
+    if let Some(f) = fuzzy {
+        notes.push(format!(
+            "the user's fuzzy rule decides: at most {} pixels may differ beyond the images' rounding, by at most {} codes (the derived rule allows none)",
+            f.pixels, f.max_diff
+        ));
+    }
+    let (la, lb) = (a.display().to_string(), b.display().to_string());
+    let report = Report::new(
+        &format!("{la} vs {lb}"),
+        (width, height),
+        (&la, &lb),
+        1,
+        &comparison,
+        &tol,
+        Some(&image_tol),
+        Times { a: None, b: None },
+        notes,
+    );
+    Ok(DiffResult {
+        report,
+        comparison,
+        a: out_a,
+        b: out_b,
+        tolerance: tol,
+    })
+}
+
 /// Renders (or reads) both sides and compares them.
 ///
 /// # Errors
 ///
 /// [`Error`] for a looser `[tolerance]`, an unreadable image or a size mismatch.
 pub fn diff(job: &Prepared, scene_label: &str, a: &Side, b: &Side) -> Result<DiffResult, Error> {
-    let (tol, image_tol) = tolerances(job)?;
+    diff_with(job, scene_label, a, b, None)
+}
+
+/// As [`diff`], with the user's fuzzy rule for image comparisons
+/// (`--fuzzy`), which replaces the scene's `[tolerance] fuzzy`.
+///
+/// # Errors
+///
+/// As [`diff`].
+pub fn diff_with(
+    job: &Prepared,
+    scene_label: &str,
+    a: &Side,
+    b: &Side,
+    fuzzy: Option<compare::Fuzzy>,
+) -> Result<DiffResult, Error> {
+    let (tol, mut image_tol) = tolerances(job)?;
+    if fuzzy.is_some() {
+        image_tol.fuzzy = fuzzy;
+    }
+    image_tol.rule = if matches!(a, Side::Pov { .. }) || matches!(b, Side::Pov { .. }) {
+        compare::ImageRule::Renderer
+    } else {
+        compare::ImageRule::SameFrame
+    };
     let mut notes = Vec::new();
     let mut max_depth = job.settings.max_depth;
     // Sides that render (a backend, or POV-Ray's reference at either depth).
@@ -303,24 +414,21 @@ pub fn diff(job: &Prepared, scene_label: &str, a: &Side, b: &Side) -> Result<Dif
     notes.extend(note_a);
     notes.extend(note_b);
     let cam = &job.tri.camera;
-    let mut tol = tol;
     let (comparison, image_tol_used) = match (&out_a, &out_b) {
         (Output::Frame(fa, _), Output::Frame(fb, _)) => (
             compare::compare_frames(&job.tri, fa, fb, &tol, job.settings.depth),
             None,
         ),
         _ => {
-            // Against a stored image the shading bound is that image's own
-            // rounding (the frames' bit-identity does not apply).
-            tol.shading_max = tol
-                .shading_max
-                .max(image_quantum(&out_a).max(image_quantum(&out_b)));
+            // Against a stored image the shading bound is the frames' (0:
+            // the same inputs give the same colour) beyond each image's
+            // own rounding, pixel by pixel.
             (
                 compare::compare_images(
                     cam.width(),
                     cam.height(),
-                    out_a.pixels(),
-                    out_b.pixels(),
+                    (out_a.pixels(), out_b.pixels()),
+                    [out_a.quantisation(), out_b.quantisation()],
                     &image_tol,
                     tol.shading_max,
                 ),
@@ -328,6 +436,12 @@ pub fn diff(job: &Prepared, scene_label: &str, a: &Side, b: &Side) -> Result<Dif
             )
         }
     };
+    if let (Some(f), Some(_)) = (image_tol.fuzzy, &image_tol_used) {
+        notes.push(format!(
+            "the user's fuzzy rule decides: at most {} pixels may differ beyond the images' rounding, by at most {} codes (the derived rule allows none)",
+            f.pixels, f.max_diff
+        ));
+    }
     let mut report = Report::new(
         scene_label,
         (cam.width(), cam.height()),
@@ -373,17 +487,6 @@ pub fn diff(job: &Prepared, scene_label: &str, a: &Side, b: &Side) -> Result<Dif
 /// over its range): a difference below it is the image's own rounding.
 /// 16-bit linear: 0.5/65535; 8-bit sRGB: half the widest step, at the top
 /// of the range (254 → 255). Frames are f32: 0.
-fn image_quantum(out: &Output) -> f64 {
-    match out {
-        Output::Frame(..) => 0.0,
-        Output::Image { linear16: true, .. } => 0.5 / 65535.0,
-        Output::Image { .. } => {
-            let lin = |c: f64| ((c / 255.0 + 0.055) / 1.055).powf(2.4);
-            0.5 * (1.0 - lin(254.0))
-        }
-    }
-}
-
 fn picture(out: &Output, w: u32, h: u32) -> Picture {
     Picture::from_linear(w, h, out.pixels())
 }

@@ -138,7 +138,8 @@ pub struct GoldenArgs {
 /// `rendiff diff`.
 #[derive(Debug, Args)]
 pub struct DiffArgs {
-    /// The scene files (.toml).
+    /// The scene files (.toml), or two images (A.png B.png) to compare pixel
+    /// by pixel with no scene.
     #[arg(required = true)]
     pub scenes: Vec<PathBuf>,
     /// Side a: a backend (raster, ray, painter).
@@ -160,6 +161,11 @@ pub struct DiffArgs {
     /// Write both images, the maps, a composite, report.json and index.html into DIR.
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
+    /// Against an image: the verdict passes when at most PIXELS pixels differ
+    /// beyond the images' rounding, none by more than MAX_DIFF 8-bit codes
+    /// (replaces the scene's [tolerance] fuzzy; may be looser than the derived rule).
+    #[arg(long, value_name = "MAX_DIFF,PIXELS", value_parser = parse_fuzzy)]
+    pub fuzzy: Option<(u8, u64)>,
     /// Render settings.
     #[command(flatten)]
     pub flags: RenderFlags,
@@ -256,4 +262,14 @@ fn parse_size(s: &str) -> Result<(u32, u32), String> {
         .parse()
         .map_err(|_| format!("height \"{h}\" is not a whole number"))?;
     Ok((w, h))
+}
+
+/// `--fuzzy MAX_DIFF,PIXELS`.
+fn parse_fuzzy(s: &str) -> Result<(u8, u64), String> {
+    let bad = || format!("expected MAX_DIFF,PIXELS (e.g. 2,10; MAX_DIFF 0 … 255), got \"{s}\"");
+    let (d, p) = s.split_once(',').ok_or_else(bad)?;
+    Ok((
+        d.trim().parse().map_err(|_| bad())?,
+        p.trim().parse().map_err(|_| bad())?,
+    ))
 }

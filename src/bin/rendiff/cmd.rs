@@ -458,6 +458,10 @@ fn progress_bar(len: usize) -> indicatif::ProgressBar {
 fn diff(a: &DiffArgs) -> Result<Outcome> {
     use rendiff::compare::report::index_html;
     use rendiff::diff;
+    let is_png = |p: &PathBuf| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("png"));
+    if a.scenes.iter().any(is_png) {
+        return diff_two_images(a, a.scenes.iter().all(is_png));
+    }
     let ov = overrides(&a.flags)?;
     let (side_a, side_b) = diff_sides(a, &ov)?;
     // Load every scene first: bad input fails before any work or output.
@@ -496,7 +500,10 @@ fn diff(a: &DiffArgs) -> Result<Outcome> {
     let mut reports = Vec::new();
     let mut entries = Vec::new();
     for (k, (label, job)) in jobs.iter().enumerate() {
-        let r = diff::diff(job, label, &side_a, &side_b)?;
+        let fuzzy = a
+            .fuzzy
+            .map(|(max_diff, pixels)| rendiff::compare::Fuzzy { max_diff, pixels });
+        let r = diff::diff_with(job, label, &side_a, &side_b, fuzzy)?;
         if let Some(base) = gbuffer_base(k) {
             for (side, out) in [("a", &r.a), ("b", &r.b)] {
                 if let diff::Output::Frame(f, _) = out {
@@ -549,6 +556,49 @@ fn diff(a: &DiffArgs) -> Result<Outcome> {
             Outcome::Differs
         },
     )
+}
+
+/// `rendiff diff A.png B.png`: two images, no scene.
+fn diff_two_images(a: &DiffArgs, all_png: bool) -> Result<Outcome> {
+    use rendiff::diff;
+    if !all_png || a.scenes.len() != 2 {
+        bail!(
+            "diff: give two images (A.png B.png) or scene files (.toml), not a mix; got {} argument(s)",
+            a.scenes.len()
+        );
+    }
+    let (pa, pb) = (&a.scenes[0], &a.scenes[1]);
+    let budget = rendiff::budget::Budget::new(
+        memory_budget(a.flags.memory_budget)?.unwrap_or(rendiff::budget::DEFAULT_MEMORY_BUDGET),
+    );
+    let fuzzy = a
+        .fuzzy
+        .map(|(max_diff, pixels)| rendiff::compare::Fuzzy { max_diff, pixels });
+    let inputs = vec![pa.clone(), pb.clone()];
+    let out_dir = a
+        .out
+        .as_ref()
+        .map(|dir| rendiff::output::OutputDir::begin(dir, &inputs))
+        .transpose()?;
+    let r = diff::diff_images(pa, pb, fuzzy, &budget)?;
+    if let Some(od) = out_dir {
+        diff::write_outputs(&r, od.path(), encoding(&a.flags)).map_err(|e| match e {
+            rendiff::Error::Image(e) => rendiff::Error::Image(od.relabel(e)),
+            e => e,
+        })?;
+        od.commit()?;
+    }
+    if a.json {
+        let text = serde_json::to_string_pretty(&r.report)?;
+        emit(format!("{text}\n").as_bytes())?;
+    } else {
+        say(&r.report.summary())?;
+    }
+    Ok(if r.report.passed() {
+        Outcome::Ok
+    } else {
+        Outcome::Differs
+    })
 }
 
 /// The two sides of `diff` as asked for (`--b pov` takes the golden folder

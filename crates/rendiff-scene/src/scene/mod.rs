@@ -128,6 +128,21 @@ pub struct ToleranceSettings {
     pub pov_max8: Option<Located>,
     /// `pov_fraction`.
     pub pov_fraction: Option<Located>,
+    /// `fuzzy = { max_diff, pixels }`: the user's own rule for image
+    /// comparisons, as reftest's `fuzzy(maxDiff, pixelCount)`.
+    pub fuzzy: Option<FuzzySetting>,
+}
+
+/// `[tolerance] fuzzy`: at most `pixels` pixels may differ (beyond the
+/// images' rounding), none by more than `max_diff` 8-bit codes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FuzzySetting {
+    /// Largest 8-bit channel difference of a differing pixel.
+    pub max_diff: u8,
+    /// Largest number of differing pixels.
+    pub pixels: u64,
+    /// Where it was written.
+    pub loc: Loc,
 }
 
 /// A polygon: outline and holes, validated and triangulated.
@@ -1872,6 +1887,25 @@ impl Loader<'_> {
         r.shading_max = get("shading_max")?;
         r.pov_max8 = get("pov_max8")?;
         r.pov_fraction = get("pov_fraction")?;
+        if let Some(f) = t.table("fuzzy")? {
+            let int = |key: &'static str, max: i64| -> Result<i64, LoadError> {
+                let v = f.int(key)?.ok_or_else(|| f.missing(key))?;
+                if !(0..=max).contains(&v.value) {
+                    return Err(f.err(
+                        &v.span,
+                        key,
+                        format!("expected an integer in 0 … {max}, got {}", v.value),
+                    ));
+                }
+                Ok(v.value)
+            };
+            r.fuzzy = Some(FuzzySetting {
+                max_diff: u8::try_from(int("max_diff", 255)?).unwrap_or(u8::MAX),
+                pixels: u64::try_from(int("pixels", i64::MAX)?).unwrap_or(u64::MAX),
+                loc: f.start(),
+            });
+            f.finish()?;
+        }
         t.finish()?;
         Ok(r)
     }

@@ -104,6 +104,11 @@ pub struct ImageTolerances {
     pub pov_max8: f64,
     /// Fraction of pixels that must be within `pov_max8`.
     pub pov_fraction: f64,
+    /// The user's own rule (`[tolerance] fuzzy` or `--fuzzy`), which
+    /// replaces the derived one and may be looser.
+    pub fuzzy: Option<Fuzzy>,
+    /// The derived rule, for when `fuzzy` is `None`.
+    pub rule: ImageRule,
 }
 
 impl Default for ImageTolerances {
@@ -111,8 +116,33 @@ impl Default for ImageTolerances {
         ImageTolerances {
             pov_max8: 2.0,
             pov_fraction: 0.999,
+            fuzzy: None,
+            rule: ImageRule::Renderer,
         }
     }
+}
+
+/// A user-stated threshold for image comparisons, as reftest's
+/// `fuzzy(maxDiff, pixelCount)`: at most `pixels` pixels may differ beyond
+/// the images' rounding, none by more than `max_diff` 8-bit codes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub struct Fuzzy {
+    /// Largest 8-bit channel difference of a differing pixel.
+    pub max_diff: u8,
+    /// Largest number of differing pixels.
+    pub pixels: u64,
+}
+
+/// Which rule decides an image comparison.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ImageRule {
+    /// Another renderer (POV-Ray): `pov_fraction` of the pixels within
+    /// `pov_max8` codes (DESIGN.md §6).
+    Renderer,
+    /// An image of the same frame (a stored render, a golden): no pixel
+    /// may differ beyond the images' rounding.
+    SameFrame,
 }
 
 /// Visibility classes counted over all samples.
@@ -209,6 +239,13 @@ fn sample_error(a: Rgb, b: Rgb) -> f32 {
 /// to derive them: nothing here depends on its bounds.
 #[must_use]
 pub fn derive_tolerances(_scene: &TriScene) -> Tolerances {
+    image_tolerances()
+}
+
+/// The derived tolerances where no scene is known (two images): the
+/// visibility limits are the oracle's constants, unused without frames.
+#[must_use]
+pub fn image_tolerances() -> Tolerances {
     Tolerances {
         edge_px_limit: oracle::EDGE_TIE_MAX_PX,
         depth_rel_limit: oracle::DEPTH_TIE_MAX_REL,
@@ -397,8 +434,95 @@ fn shading_stats(
     }
 }
 
-/// Compares pixel colours with an image (a POV-Ray reference or a
-/// regression golden): visibility is unknown, every pixel is a shading sample.
+/// How a side's colours were stored: what a value read back can have
+/// been before it was rounded.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Quantisation {
+    /// Rendered now: the value is exact.
+    Exact,
+    /// An 8-bit sRGB PNG: a code `c` stands for every linear value whose
+    /// sRGB encoding lies in `[(c − ½)/255, (c + ½)/255]`.
+    Srgb8,
+    /// A 16-bit linear PNG: a code `c` stands for `[(c − ½), (c + ½)]/65535`.
+    Linear16,
+}
+
+impl Quantisation {
+    /// The interval of linear values (clamped to [0, 1]) that `v`, as read
+    /// back, can stand for.
+    fn interval(self, v: f32) -> (f32, f32) {
+        let v = v.clamp(0.0, 1.0);
+        match self {
+            Quantisation::Exact => (v, v),
+            Quantisation::Srgb8 => {
+                let c = f32::from(crate::color::to_srgb8(v));
+                let lin = |e: f32| crate::color::srgb_decode(e.clamp(0.0, 1.0));
+                (lin((c - 0.5) / 255.0), lin((c + 0.5) / 255.0))
+            }
+            Quantisation::Linear16 => {
+                let c = f32::from(crate::color::to_linear16(v));
+                (
+                    ((c - 0.5) / 65535.0).max(0.0),
+                    ((c + 0.5) / 65535.0).min(1.0),
+                )
+            }
+        }
+    }
+
+    /// The stored code of `v` (`None` when exact).
+    fn code(self, v: f32) -> Option<u16> {
+        match self {
+            Quantisation::Exact => None,
+            Quantisation::Srgb8 => Some(u16::from(crate::color::to_srgb8(v))),
+            Quantisation::Linear16 => Some(crate::color::to_linear16(v)),
+        }
+    }
+}
+
+/// The colour difference beyond both sides' storage rounding, the largest
+/// channel's: 0 where both values store as the same code of the coarser
+/// side's format (decided on the codes, so that no f32 rounding of an
+/// interval end counts a boundary value as over), else the gap between
+/// the intervals of values the two stored codes stand for.
+fn quantised_error(p: Rgb, q: Rgb, quant: [Quantisation; 2]) -> f32 {
+    let common = match quant {
+        [Quantisation::Exact, q] | [q, Quantisation::Exact] => Some(q),
+        [a, b] if a == b => Some(a),
+        _ => None,
+    };
+    p.to_array()
+        .iter()
+        .zip(q.to_array())
+        .map(|(&x, y)| {
+            match common {
+                Some(Quantisation::Exact) => return (x.clamp(0.0, 1.0) - y.clamp(0.0, 1.0)).abs(),
+                Some(c) if c.code(x) == c.code(y) => return 0.0,
+                _ => {}
+            }
+            let (xl, xh) = quant[0].interval(x);
+            let (yl, yh) = quant[1].interval(y);
+            (xl - yh).max(yl - xh).max(0.0)
+        })
+        .fold(0.0, f32::max)
+}
+
+/// The largest 8-bit sRGB code difference of a pixel's channels.
+fn max8_diff(p: Rgb, q: Rgb) -> u8 {
+    let c = crate::color::to_srgb8;
+    c(p.r)
+        .abs_diff(c(q.r))
+        .max(c(p.g).abs_diff(c(q.g)))
+        .max(c(p.b).abs_diff(c(q.b)))
+}
+
+/// Compares pixel colours with an image (a POV-Ray reference, a
+/// regression golden, another renderer's picture): visibility is unknown,
+/// every pixel is a shading sample. A pixel is over the shading bound when
+/// its difference *beyond the storage rounding of each side*
+/// ([`Quantisation`]) exceeds `shading_max`: an 8-bit image's half-code
+/// rounding is never counted, yet one code of change anywhere (0.00015 in
+/// linear at the dark end, 0.0044 at the bright end) is. The per-pixel
+/// errors (the heat map) are those differences beyond rounding.
 ///
 /// # Panics
 ///
@@ -407,22 +531,24 @@ fn shading_stats(
 pub(crate) fn compare_images(
     w: u32,
     h: u32,
-    a: &[Rgb],
-    b: &[Rgb],
+    (a, b): (&[Rgb], &[Rgb]),
+    quant: [Quantisation; 2],
     tol: &ImageTolerances,
     shading_max: f64,
 ) -> Comparison {
     assert_eq!(a.len(), b.len(), "images differ in size");
     let mut errors = Vec::with_capacity(a.len());
     let (mut sum, mut sq, mut max, mut over) = (0.0f64, 0.0f64, 0.0f64, 0u64);
+    let mut over_max8 = 0u8;
     for (p, q) in a.iter().zip(b) {
-        let e = sample_error(*p, *q);
-        errors.push(e);
-        let e = f64::from(e);
+        let e = f64::from(sample_error(*p, *q));
         sum += e;
         max = max.max(e);
-        if e > shading_max {
+        let beyond = quantised_error(*p, *q, quant);
+        errors.push(beyond);
+        if f64::from(beyond) > shading_max {
             over += 1;
+            over_max8 = over_max8.max(max8_diff(*p, *q));
         }
         for (x, y) in p.clamp01().to_array().iter().zip(q.clamp01().to_array()) {
             sq += f64::from(x - y).powi(2);
@@ -432,21 +558,21 @@ pub(crate) fn compare_images(
     let n = a.len().max(1) as f64;
     let rmse = (sq / (3.0 * n)).sqrt();
     let image = metrics::image_stats(w, h, a, b);
-    // The fuzzy verdict: enough pixels within pov_max8 (8-bit sRGB).
-    let within = a
-        .iter()
-        .zip(b)
-        .filter(|(p, q)| {
-            let d = [
-                crate::color::to_srgb8(p.r).abs_diff(crate::color::to_srgb8(q.r)),
-                crate::color::to_srgb8(p.g).abs_diff(crate::color::to_srgb8(q.g)),
-                crate::color::to_srgb8(p.b).abs_diff(crate::color::to_srgb8(q.b)),
-            ];
-            f64::from(*d.iter().max().unwrap_or(&0)) <= tol.pov_max8
-        })
-        .count();
-    #[expect(clippy::cast_precision_loss, reason = "pixel counts below 2^52")]
-    let pass = within as f64 >= tol.pov_fraction * n;
+    let pass = match (tol.fuzzy, tol.rule) {
+        (Some(f), _) => over <= f.pixels && over_max8 <= f.max_diff,
+        (None, ImageRule::SameFrame) => over == 0,
+        (None, ImageRule::Renderer) => {
+            // Enough pixels within pov_max8 (8-bit sRGB).
+            let within = a
+                .iter()
+                .zip(b)
+                .filter(|(p, q)| f64::from(max8_diff(**p, **q)) <= tol.pov_max8)
+                .count();
+            #[expect(clippy::cast_precision_loss, reason = "pixel counts below 2^52")]
+            let enough = within as f64 >= tol.pov_fraction * n;
+            enough
+        }
+    };
     Comparison {
         visibility: None,
         shading: ShadingStats {

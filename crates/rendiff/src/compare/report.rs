@@ -51,6 +51,14 @@ pub struct ToleranceJson {
     /// For image comparisons: the fraction of pixels that must meet it.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub pov_fraction: Option<f64>,
+    /// For image comparisons: the user's fuzzy rule, when one decides.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fuzzy: Option<super::Fuzzy>,
+    /// For image comparisons: the derived rule (`renderer`: POV-Ray's
+    /// `pov_max8`/`pov_fraction`; `same_frame`: no pixel beyond the
+    /// images' rounding).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub image_rule: Option<super::ImageRule>,
 }
 
 /// Times of the two sides (ms; null for a stored image).
@@ -142,6 +150,8 @@ impl Report {
                 shading_max: tol.shading_max,
                 pov_max8: image_tol.map(|t| t.pov_max8),
                 pov_fraction: image_tol.map(|t| t.pov_fraction),
+                fuzzy: image_tol.and_then(|t| t.fuzzy),
+                image_rule: image_tol.map(|t| t.rule),
             },
             time_ms,
             verdict: if cmp.pass { "pass" } else { "fail" }.to_string(),
@@ -224,8 +234,21 @@ impl Report {
         } else {
             let _ = write!(o, "  tolerance: gate {:.1e}", t.gate_eps);
         }
-        if let (Some(m), Some(f)) = (t.pov_max8, t.pov_fraction) {
-            let _ = write!(o, ", 8-bit ≤ {m} on ≥ {:.2}% of pixels", f * 100.0);
+        match (t.fuzzy, t.image_rule, t.pov_max8, t.pov_fraction) {
+            (Some(f), ..) => {
+                let _ = write!(
+                    o,
+                    ", the user's fuzzy rule: ≤ {} pixels differ, by ≤ {} codes",
+                    f.pixels, f.max_diff
+                );
+            }
+            (None, Some(super::ImageRule::SameFrame), ..) => {
+                o.push_str(", no pixel beyond the images' rounding");
+            }
+            (None, _, Some(m), Some(f)) => {
+                let _ = write!(o, ", 8-bit ≤ {m} on ≥ {:.2}% of pixels", f * 100.0);
+            }
+            _ => {}
         }
         o.push('\n');
         let ms = |v: Option<f64>| v.map_or_else(|| "stored".to_string(), |v| format!("{v:.1} ms"));

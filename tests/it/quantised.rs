@@ -1,0 +1,227 @@
+//! Comparing with an 8-bit or 16-bit PNG, the way people test their own
+//! renderer: the PNG's rounding is not a difference, one code of change is.
+
+use std::path::Path;
+use std::process::Command;
+
+use rendiff::color::Rgb;
+use rendiff::image_io::{self, PngEncoding};
+
+use crate::util::scene_path;
+
+fn rendiff(args: &[&str], dir: &Path) -> (i32, String) {
+    let o = Command::new(env!("CARGO_BIN_EXE_rendiff"))
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .unwrap();
+    let text =
+        String::from_utf8_lossy(&o.stdout).into_owned() + &String::from_utf8_lossy(&o.stderr);
+    (o.status.code().unwrap_or(-1), text)
+}
+
+fn over(json: &str) -> u64 {
+    let v: serde_json::Value = serde_json::from_str(json).unwrap();
+    v["shading"]["over_threshold"].as_u64().unwrap()
+}
+
+/// Renders `scene` with the ray tracer into `png` (8-bit or 16-bit).
+fn render(scene: &str, png: &Path, linear16: bool, dir: &Path) {
+    let s = scene_path(scene);
+    let mut args = vec![
+        "render",
+        s.to_str().unwrap(),
+        "--backend",
+        "ray",
+        "--size",
+        "96x72",
+    ];
+    args.extend(["-o", png.to_str().unwrap()]);
+    if linear16 {
+        args.push("--linear16");
+    }
+    let (code, text) = rendiff(&args, dir);
+    assert_eq!(code, 0, "{text}");
+}
+
+fn diff_json(scene: &str, png: &Path, dir: &Path) -> (i32, String) {
+    let s = scene_path(scene);
+    rendiff(
+        &[
+            "diff",
+            s.to_str().unwrap(),
+            "--a",
+            "ray",
+            "--b",
+            png.to_str().unwrap(),
+            "--size",
+            "96x72",
+            "--json",
+        ],
+        dir,
+    )
+}
+
+#[test]
+fn an_image_is_never_over_against_its_own_rounding() {
+    // rendiff's own render stored as 8-bit sRGB and as 16-bit linear: the
+    // same frame, rounded once. Every scene, every pixel within its code.
+    let dir = tempfile::tempdir().unwrap();
+    for scene in ["menagerie", "textured", "glass", "bumps", "inside"] {
+        for linear16 in [false, true] {
+            let png = dir.path().join(format!("{scene}-{linear16}.png"));
+            render(scene, &png, linear16, dir.path());
+            let (code, json) = diff_json(scene, &png, dir.path());
+            assert_eq!(over(&json), 0, "{scene} linear16={linear16}: {json}");
+            assert!(code == 0 || code == 1, "{json}");
+        }
+    }
+}
+
+#[test]
+fn one_code_of_change_is_over_even_where_the_image_is_dark() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("ref.png");
+    render("menagerie", &png, false, dir.path());
+    let img = image_io::read_png_linear(&png).unwrap();
+    // The darkest and the brightest pixel: one code there is 1.5e-4 and
+    // 4.4e-3 in linear, the range a single global bound cannot span.
+    let lum = |c: &Rgb| c.r + c.g + c.b;
+    let idx = |best: fn(f32, f32) -> bool| {
+        (0..img.pixels.len())
+            .reduce(|i, j| {
+                if best(lum(&img.pixels[j]), lum(&img.pixels[i])) {
+                    j
+                } else {
+                    i
+                }
+            })
+            .unwrap()
+    };
+    for k in [idx(|a, b| a < b), idx(|a, b| a > b)] {
+        let mut px = img.pixels.clone();
+        let code = rendiff::color::to_srgb8(px[k].g);
+        let moved = if code == 255 { code - 1 } else { code + 1 };
+        px[k].g = rendiff::color::srgb_decode(f32::from(moved) / 255.0);
+        let changed = dir.path().join(format!("changed-{k}.png"));
+        image_io::write_png(&changed, img.width, img.height, &px, PngEncoding::Srgb8).unwrap();
+        let (code, json) = diff_json("menagerie", &changed, dir.path());
+        assert_eq!(over(&json), 1, "pixel {k}: {json}");
+        assert_eq!(code, 1, "a changed pixel fails the verdict");
+    }
+}
+
+#[test]
+fn two_images_compare_without_a_scene_and_a_fuzzy_rule_is_the_users() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("ref.png");
+    render("spheres", &png, false, dir.path());
+    let img = image_io::read_png_linear(&png).unwrap();
+    let mut px = img.pixels.clone();
+    // Three pixels changed by 3 codes each.
+    for k in [10usize, 500, 3000] {
+        let c = rendiff::color::to_srgb8(px[k].r);
+        let moved = if c >= 3 { c - 3 } else { c + 3 };
+        px[k].r = rendiff::color::srgb_decode(f32::from(moved) / 255.0);
+    }
+    let changed = dir.path().join("changed.png");
+    image_io::write_png(&changed, img.width, img.height, &px, PngEncoding::Srgb8).unwrap();
+    let (p, c) = (png.to_str().unwrap(), changed.to_str().unwrap());
+    let (code, json) = rendiff(&["diff", p, p, "--json"], dir.path());
+    assert_eq!((code, over(&json)), (0, 0), "{json}");
+    let (code, json) = rendiff(&["diff", p, c, "--json"], dir.path());
+    assert_eq!((code, over(&json)), (1, 3), "{json}");
+    // The user's rule decides, and says so; it may be looser than the
+    // derived one, and it still fails when exceeded.
+    for (rule, want) in [("3,3", 0), ("2,3", 1), ("3,2", 1)] {
+        let (code, json) = rendiff(&["diff", p, c, "--json", "--fuzzy", rule], dir.path());
+        assert_eq!(code, want, "--fuzzy {rule}: {json}");
+        let v: serde_json::Value = serde_json::from_str(&json).unwrap();
+        assert!(v["tolerance"]["fuzzy"].is_object(), "{json}");
+    }
+    let (_, text) = rendiff(&["diff", p, c, "--fuzzy", "3,3"], dir.path());
+    assert!(text.contains("the user's fuzzy rule"), "{text}");
+    // A size mismatch names the file; a mix of image and scene is refused.
+    let small = dir.path().join("small.png");
+    image_io::write_png(&small, 2, 2, &[Rgb::BLACK; 4], PngEncoding::Srgb8).unwrap();
+    let (code, text) = rendiff(&["diff", p, small.to_str().unwrap()], dir.path());
+    assert_eq!(code, 2, "{text}");
+    assert!(text.contains("small.png"), "{text}");
+    let s = scene_path("spheres");
+    let (code, text) = rendiff(&["diff", s.to_str().unwrap(), p], dir.path());
+    assert_eq!(code, 2, "{text}");
+}
+
+#[test]
+fn the_scenes_fuzzy_table_is_read_and_checked() {
+    let dir = tempfile::tempdir().unwrap();
+    let base = std::fs::read_to_string(scene_path("spheres")).unwrap();
+    // The scene's textures, beside the copy.
+    let textures = scene_path("spheres").parent().unwrap().join("textures");
+    std::fs::create_dir(dir.path().join("textures")).unwrap();
+    for f in std::fs::read_dir(textures).unwrap() {
+        let f = f.unwrap().path();
+        std::fs::copy(&f, dir.path().join("textures").join(f.file_name().unwrap())).unwrap();
+    }
+    let scene = dir.path().join("s.toml");
+    let png = dir.path().join("ref.png");
+    let write = |extra: &str| {
+        std::fs::write(&scene, format!("{base}\n[tolerance]\n{extra}\n")).unwrap();
+    };
+    write("fuzzy = { max_diff = 3, pixels = 1 }");
+    let args = |out: &Path| {
+        vec![
+            "render".to_string(),
+            scene.to_str().unwrap().to_string(),
+            "--backend".into(),
+            "ray".into(),
+            "-o".into(),
+            out.to_str().unwrap().to_string(),
+        ]
+    };
+    let a: Vec<String> = args(&png);
+    let (code, text) = rendiff(
+        &a.iter().map(String::as_str).collect::<Vec<_>>(),
+        dir.path(),
+    );
+    assert_eq!(code, 0, "{text}");
+    let img = image_io::read_png_linear(&png).unwrap();
+    let mut px = img.pixels.clone();
+    px[7].b = if px[7].b > 0.5 { 0.0 } else { 1.0 };
+    let changed = dir.path().join("changed.png");
+    image_io::write_png(&changed, img.width, img.height, &px, PngEncoding::Srgb8).unwrap();
+    let diff = |png: &Path| {
+        rendiff(
+            &[
+                "diff",
+                scene.to_str().unwrap(),
+                "--a",
+                "ray",
+                "--b",
+                png.to_str().unwrap(),
+                "--json",
+            ],
+            dir.path(),
+        )
+    };
+    // One pixel over, but by far more than 3 codes: the rule fails it.
+    let (code, json) = diff(&changed);
+    assert_eq!((code, over(&json)), (1, 1), "{json}");
+    write("fuzzy = { max_diff = 255, pixels = 1 }");
+    let (code, json) = diff(&changed);
+    assert_eq!(code, 0, "{json}");
+    for (bad, key) in [
+        ("fuzzy = { max_diff = 256, pixels = 1 }", "max_diff"),
+        ("fuzzy = { max_diff = 2 }", "pixels"),
+        ("fuzzy = { max_diff = 2, pixels = -1 }", "pixels"),
+        ("fuzzy = { max_diff = 2, pixels = 1, pixel = 3 }", "pixel"),
+    ] {
+        write(bad);
+        let (code, text) = diff(&changed);
+        assert_eq!(code, 2, "{bad}: {text}");
+        assert!(
+            text.contains(key) && text.contains("s.toml"),
+            "{bad}: {text}"
+        );
+    }
+}
