@@ -210,6 +210,7 @@ fn produce(job: &Prepared, side: &Side, max_depth: u32) -> Result<(Output, Optio
                 Variant::Main
             };
             let started = std::time::Instant::now();
+            let mut stale_note = None;
             let img = if *render {
                 golden::povray_version().map_err(Error::from)?;
                 let refs = golden::references(&job.scene, &job.tri).map_err(Error::from)?;
@@ -229,6 +230,16 @@ fn produce(job: &Prepared, side: &Side, max_depth: u32) -> Result<(Output, Optio
                         job.scene.path.display()
                     )));
                 }
+                // A reference rendered from another version of the scene
+                // is not evidence about this one: say so before any count.
+                let stale = golden::stale(&job.scene, &job.tri, golden_dir).map_err(Error::from)?;
+                if !stale.is_empty() {
+                    stale_note = Some(format!(
+                        "the stored POV-Ray reference is stale ({}): it was rendered from another version of the scene, so its differences say nothing about this one; re-render it with `rendiff golden --update {}` or compare with --render",
+                        stale.join("; "),
+                        job.scene.path.display()
+                    ));
+                }
                 let cam = &job.tri.camera;
                 image_io::read_png_linear_within(
                     &path,
@@ -236,13 +247,16 @@ fn produce(job: &Prepared, side: &Side, max_depth: u32) -> Result<(Output, Optio
                     &job.budget,
                 )?
             };
-            Output::Image {
-                width: img.width,
-                height: img.height,
-                pixels: img.pixels,
-                linear16: img.linear16,
-                rendered_ms: render.then(|| started.elapsed().as_secs_f64() * 1e3),
-            }
+            return Ok((
+                Output::Image {
+                    width: img.width,
+                    height: img.height,
+                    pixels: img.pixels,
+                    linear16: img.linear16,
+                    rendered_ms: render.then(|| started.elapsed().as_secs_f64() * 1e3),
+                },
+                stale_note,
+            ));
         }
         Side::Backend(b) => {
             let r = job.render_with_depth(*b, max_depth)?;

@@ -426,7 +426,7 @@ fn golden(a: &GoldenArgs) -> Result<Outcome> {
     result?;
     if matches!(outcome, Outcome::Differs) {
         warn(
-            "some references are stale or no longer reproduced; run `make golden` (rendiff golden --update) after checking why",
+            "some references are stale or no longer reproduced; after checking why, re-render them with `rendiff golden --update SCENE...`",
         );
     }
     Ok(outcome)
