@@ -13,6 +13,7 @@ lint:
 	$(CARGO) fmt --all --check
 	$(CARGO) fmt --manifest-path peers/Cargo.toml --check
 	$(CARGO) fmt --manifest-path fuzz/Cargo.toml --check
+	$(CARGO) fmt --manifest-path examples/user-crate/Cargo.toml --check
 	$(CARGO) clippy --workspace --all-targets -- -D warnings
 
 unit:

@@ -203,8 +203,13 @@ const ALLOWED: &[(&str, &[&str])] = &[
     (
         "diff",
         &[
-            "facade", "accel", "color", "compare", "frame", "image_io", "options", "pov", "scene",
+            "facade", "accel", "budget", "color", "compare", "frame", "image_io", "options", "pov",
+            "scene",
         ],
+    ),
+    (
+        "snapshot",
+        &["facade", "budget", "color", "compare", "diff", "image_io"],
     ),
     (
         "fuzz",

@@ -50,5 +50,7 @@ mod resources;
 mod stale;
 /// Tessellation: chord error bounds and closedness.
 mod tessellation;
+/// A user's own crate under snapshot tests, reviewed with `rendiff review`.
+mod user_crate;
 /// Helpers shared by the modules.
 mod util;

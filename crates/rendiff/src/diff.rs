@@ -313,6 +313,27 @@ pub fn diff_images(
     fuzzy: Option<compare::Fuzzy>,
     budget: &crate::budget::Budget,
 ) -> Result<DiffResult, Error> {
+    let img_a = image_io::read_png_linear_within(a, None, budget)?;
+    let img_b = image_io::read_png_linear_within(b, Some((img_a.width, img_a.height)), budget)?;
+    Ok(diff_image_data(
+        (&a.display().to_string(), img_a),
+        (&b.display().to_string(), img_b),
+        fuzzy,
+    ))
+}
+
+/// As [`diff_images`], on images already read (or made: an image rounded
+/// as its PNG would store it), each with its label.
+///
+/// # Panics
+///
+/// If the images differ in size.
+#[must_use]
+pub fn diff_image_data(
+    (la, img_a): (&str, image_io::LinearImage),
+    (lb, img_b): (&str, image_io::LinearImage),
+    fuzzy: Option<compare::Fuzzy>,
+) -> DiffResult {
     let image = |img: image_io::LinearImage| Output::Image {
         width: img.width,
         height: img.height,
@@ -320,14 +341,8 @@ pub fn diff_images(
         linear16: img.linear16,
         rendered_ms: None,
     };
-    let img_a = image_io::read_png_linear_within(a, None, budget)?;
     let (width, height) = (img_a.width, img_a.height);
-    let out_a = image(img_a);
-    let out_b = image(image_io::read_png_linear_within(
-        b,
-        Some((width, height)),
-        budget,
-    )?);
+    let (out_a, out_b) = (image(img_a), image(img_b));
     let tol = compare::image_tolerances();
     let image_tol = ImageTolerances {
         fuzzy,
@@ -349,11 +364,10 @@ pub fn diff_images(
             f.pixels, f.max_diff
         ));
     }
-    let (la, lb) = (a.display().to_string(), b.display().to_string());
     let report = Report::new(
         &format!("{la} vs {lb}"),
         (width, height),
-        (&la, &lb),
+        (la, lb),
         1,
         &comparison,
         &tol,
@@ -361,13 +375,13 @@ pub fn diff_images(
         Times { a: None, b: None },
         notes,
     );
-    Ok(DiffResult {
+    DiffResult {
         report,
         comparison,
         a: out_a,
         b: out_b,
         tolerance: tol,
-    })
+    }
 }
 
 /// Renders (or reads) both sides and compares them.

@@ -29,6 +29,7 @@ pub mod diff;
 #[cfg(feature = "testing")]
 pub mod fuzz;
 pub mod pov;
+pub mod snapshot;
 
 // The floors below, re-exported so a user depends on `rendiff` alone and
 // reaches every part by one path (`rendiff::scene::Scene`,

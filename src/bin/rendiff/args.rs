@@ -41,12 +41,37 @@ pub enum Command {
     /// Writes results.csv, a time-against-error plot per scene (with the
     /// Pareto front marked), plan_savings.svg and index.html into --out.
     Bench(BenchArgs),
+    /// Walk the pending snapshot images (NAME.new.png beside NAME.png) and accept or reject each.
+    ///
+    /// Shows each pending image's verdict against its golden; on a terminal
+    /// asks for each: [a]ccept (the pending image becomes the golden),
+    /// [r]eject (it is removed), [s]kip. Exit status 1 while images remain
+    /// pending.
+    Review(ReviewArgs),
     /// Draw the visible edges (silhouettes, creases, boundaries) as SVG or PNG.
     ///
     /// Hidden parts are removed by Appel's quantitative invisibility: the
     /// number of surfaces in front of an edge changes only where it passes
     /// behind a contour edge.
     Lines(LinesArgs),
+}
+
+/// `rendiff review`.
+#[derive(Debug, Args)]
+pub struct ReviewArgs {
+    /// The golden folder to walk.
+    #[arg(default_value = "tests/golden", value_name = "DIR")]
+    pub dir: PathBuf,
+    /// Accept every pending image without asking.
+    #[arg(long, conflicts_with = "reject_all")]
+    pub accept_all: bool,
+    /// Reject every pending image without asking.
+    #[arg(long)]
+    pub reject_all: bool,
+    /// Also write each comparison's pictures and report (a.png golden,
+    /// b.png pending, heat map, index.html) into DIR/NAME.
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
 }
 
 /// `rendiff lines`.

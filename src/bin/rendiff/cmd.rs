@@ -12,7 +12,7 @@ use rendiff::{Backend, Overrides, Prepared};
 use crate::Outcome;
 use crate::args::{
     BenchArgs, Cli, Command, DiffArgs, GoldenArgs, LinesArgs, PlanArgs, PovArgs, RenderArgs,
-    RenderFlags,
+    RenderFlags, ReviewArgs,
 };
 
 /// Set once standard output is a closed pipe: later output is dropped.
@@ -72,6 +72,7 @@ pub fn run(cli: Cli) -> Result<Outcome> {
         Command::Golden(a) => golden(&a),
         Command::Bench(a) => bench(&a),
         Command::Lines(a) => lines(&a),
+        Command::Review(a) => review(&a),
     }
 }
 
@@ -938,4 +939,78 @@ pub fn describe(job: &Prepared) -> String {
 
 fn round3(v: [f64; 3]) -> [f64; 3] {
     v.map(|x| (x * 1000.0).round() / 1000.0 + 0.0)
+}
+
+/// `rendiff review`: the pending snapshot images, one by one.
+fn review(a: &ReviewArgs) -> Result<Outcome> {
+    use rendiff::snapshot;
+    use std::io::{BufRead, IsTerminal};
+    let pending = snapshot::pending(&a.dir)?;
+    if pending.is_empty() {
+        say(&format!("no pending images under {}\n", a.dir.display()))?;
+        return Ok(Outcome::Ok);
+    }
+    let budget = rendiff::budget::Budget::new(rendiff::budget::DEFAULT_MEMORY_BUDGET);
+    let interactive = !a.accept_all && !a.reject_all && std::io::stdin().is_terminal();
+    let mut left = 0usize;
+    let mut stdin = std::io::stdin().lock();
+    for (k, p) in pending.iter().enumerate() {
+        let name = p
+            .pending
+            .strip_prefix(&a.dir)
+            .unwrap_or(&p.pending)
+            .display()
+            .to_string();
+        say(&format!("[{}/{}] {name}\n", k + 1, pending.len()))?;
+        if p.golden.exists() {
+            let r = rendiff::diff::diff_images(&p.golden, &p.pending, None, &budget)?;
+            say(&r.report.summary())?;
+            if let Some(out) = &a.out {
+                let dir = out.join(name.trim_end_matches(snapshot::PENDING_SUFFIX));
+                let o = rendiff::output::OutputDir::begin(
+                    &dir,
+                    &[p.golden.clone(), p.pending.clone()],
+                )?;
+                rendiff::diff::write_outputs(&r, o.path(), rendiff::image_io::PngEncoding::Srgb8)?;
+                o.commit()?;
+                say(&format!(
+                    "  pictures: {}\n",
+                    dir.join("index.html").display()
+                ))?;
+            }
+        } else {
+            say(&format!("  new: no golden yet at {}\n", p.golden.display()))?;
+        }
+        let choice = if a.accept_all {
+            'a'
+        } else if a.reject_all {
+            'r'
+        } else if interactive {
+            eprint!("  [a]ccept, [r]eject, [s]kip? ");
+            let mut line = String::new();
+            stdin.read_line(&mut line)?;
+            line.trim().chars().next().unwrap_or('s')
+        } else {
+            's'
+        };
+        match choice {
+            'a' | 'A' => {
+                p.accept()?;
+                say(&format!("  accepted: {}\n", p.golden.display()))?;
+            }
+            'r' | 'R' => {
+                p.reject()?;
+                say("  rejected\n")?;
+            }
+            _ => left += 1,
+        }
+    }
+    if left > 0 {
+        warn(&format!(
+            "{left} image(s) still pending; accept or reject them with `rendiff review {} --accept-all`, `--reject-all`, or one by one on a terminal",
+            a.dir.display()
+        ));
+        return Ok(Outcome::Differs);
+    }
+    Ok(Outcome::Ok)
 }

@@ -1,0 +1,1 @@
+//! An example crate whose tests put its scene under regression with rendiff.
