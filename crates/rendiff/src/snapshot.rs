@@ -9,7 +9,7 @@
 //! // (examples/user-crate in this repository is such a crate):
 //! #[test]
 //! fn ball() {
-//!     rendiff::assert_golden!("scenes/ball.toml");
+//!     assert_golden!("scenes/ball.toml"); // the macro at rendiff's root
 //! }
 //! ```
 //!
