@@ -46,6 +46,8 @@ mod raster;
 mod ray;
 /// Resource bounds: memory per triangle and per sample, the budget.
 mod resources;
+/// `--shard K/N` and `rendiff report`: suites split across machines.
+mod shard;
 /// A stale stored reference is named before any count.
 mod stale;
 /// Tessellation: chord error bounds and closedness.

@@ -41,6 +41,12 @@ pub enum Command {
     /// Writes results.csv, a time-against-error plot per scene (with the
     /// Pareto front marked), plan_savings.svg and index.html into --out.
     Bench(BenchArgs),
+    /// Merge verdicts (the --json output of diff runs, e.g. one per shard) into one report.
+    ///
+    /// Reads JSON files (a report or an array of reports) and folders (every
+    /// report.json under them); prints each scene's verdict and the totals,
+    /// or the merged array with --json. Exit status 1 when a scene failed.
+    Report(ReportArgs),
     /// Walk the pending snapshot images (NAME.new.png beside NAME.png) and accept or reject each.
     ///
     /// Shows each pending image's verdict against its golden; on a terminal
@@ -54,6 +60,17 @@ pub enum Command {
     /// number of surfaces in front of an edge changes only where it passes
     /// behind a contour edge.
     Lines(LinesArgs),
+}
+
+/// `rendiff report`.
+#[derive(Debug, Args)]
+pub struct ReportArgs {
+    /// JSON files and folders of diff results.
+    #[arg(required = true)]
+    pub inputs: Vec<PathBuf>,
+    /// Print the merged reports as one JSON array.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// `rendiff review`.
@@ -158,6 +175,10 @@ pub struct GoldenArgs {
     /// Folder of the references.
     #[arg(long = "golden", default_value = "golden/pov", value_name = "DIR")]
     pub golden_dir: PathBuf,
+    /// Work on shard K of N only (1-based): a scene belongs to the shard its
+    /// path's hash names, the same on every machine and run.
+    #[arg(long, value_name = "K/N", value_parser = parse_shard)]
+    pub shard: Option<(u64, u64)>,
 }
 
 /// `rendiff diff`.
@@ -191,6 +212,11 @@ pub struct DiffArgs {
     /// (replaces the scene's [tolerance] fuzzy; may be looser than the derived rule).
     #[arg(long, value_name = "MAX_DIFF,PIXELS", value_parser = parse_fuzzy)]
     pub fuzzy: Option<(u8, u64)>,
+    /// Work on shard K of N only (1-based): a scene belongs to the shard its
+    /// path's hash names, the same on every machine and run; merge the
+    /// shards' --json outputs with `rendiff report`.
+    #[arg(long, value_name = "K/N", value_parser = parse_shard)]
+    pub shard: Option<(u64, u64)>,
     /// Render settings.
     #[command(flatten)]
     pub flags: RenderFlags,
@@ -297,4 +323,18 @@ fn parse_fuzzy(s: &str) -> Result<(u8, u64), String> {
         d.trim().parse().map_err(|_| bad())?,
         p.trim().parse().map_err(|_| bad())?,
     ))
+}
+
+/// `--shard K/N`: 1 ≤ K ≤ N.
+fn parse_shard(s: &str) -> Result<(u64, u64), String> {
+    let bad = || format!("expected K/N with 1 ≤ K ≤ N (e.g. 2/4), got \"{s}\"");
+    let (k, n) = s.split_once('/').ok_or_else(bad)?;
+    let (k, n): (u64, u64) = (
+        k.trim().parse().map_err(|_| bad())?,
+        n.trim().parse().map_err(|_| bad())?,
+    );
+    if k == 0 || k > n {
+        return Err(bad());
+    }
+    Ok((k, n))
 }

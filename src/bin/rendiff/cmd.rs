@@ -12,7 +12,7 @@ use rendiff::{Backend, Overrides, Prepared};
 use crate::Outcome;
 use crate::args::{
     BenchArgs, Cli, Command, DiffArgs, GoldenArgs, LinesArgs, PlanArgs, PovArgs, RenderArgs,
-    RenderFlags, ReviewArgs,
+    RenderFlags, ReportArgs, ReviewArgs,
 };
 
 /// Set once standard output is a closed pipe: later output is dropped.
@@ -73,6 +73,7 @@ pub fn run(cli: Cli) -> Result<Outcome> {
         Command::Bench(a) => bench(&a),
         Command::Lines(a) => lines(&a),
         Command::Review(a) => review(&a),
+        Command::Report(a) => report(&a),
     }
 }
 
@@ -351,7 +352,7 @@ fn scene_list(given: &[PathBuf]) -> Result<Vec<PathBuf>> {
 
 fn golden(a: &GoldenArgs) -> Result<Outcome> {
     use rendiff::pov::golden;
-    let scenes = scene_list(&a.scenes)?;
+    let scenes = shard(scene_list(&a.scenes)?, a.shard);
     // Load every scene first: bad input fails (naming its file) before
     // POV-Ray is looked for or anything renders.
     let jobs: Vec<Prepared> = scenes
@@ -465,15 +466,24 @@ fn diff(a: &DiffArgs) -> Result<Outcome> {
     }
     let ov = overrides(&a.flags)?;
     let (side_a, side_b) = diff_sides(a, &ov)?;
+    let scenes = shard(a.scenes.clone(), a.shard);
+    if scenes.is_empty() {
+        // A shard may hold none of a short list: an empty result, not an error.
+        if a.json {
+            emit(b"[]\n")?;
+        } else {
+            say("this shard holds none of the scenes given\n")?;
+        }
+        return Ok(Outcome::Ok);
+    }
     // Load every scene first: bad input fails before any work or output.
-    let jobs: Vec<(String, Prepared)> = a
-        .scenes
+    let jobs: Vec<(String, Prepared)> = scenes
         .iter()
         .map(|p| Ok((p.display().to_string(), Prepared::load(p, &ov)?)))
         .collect::<Result<_>>()?;
     let inputs = diff_inputs(&jobs, [&side_a, &side_b]);
     let several = jobs.len() > 1;
-    let folders = rendiff::output::scene_folders(&a.scenes);
+    let folders = rendiff::output::scene_folders(&scenes);
     // The --out set is written into a fresh folder and swapped in whole.
     let out_dir = a
         .out
@@ -1013,4 +1023,111 @@ fn review(a: &ReviewArgs) -> Result<Outcome> {
         return Ok(Outcome::Differs);
     }
     Ok(Outcome::Ok)
+}
+
+/// The scenes of shard `K/N` (all without one): a scene belongs to shard
+/// `1 + fnv1a(path) mod N`, its path relative to the current folder (as
+/// given, or with the current folder's prefix taken off an absolute one)
+/// with `/` separators, so the assignment is the same on every machine,
+/// run and order of arguments.
+fn shard(scenes: Vec<PathBuf>, shard: Option<(u64, u64)>) -> Vec<PathBuf> {
+    let Some((k, n)) = shard else {
+        return scenes;
+    };
+    let fnv1a = |s: &str| {
+        s.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| {
+            (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
+        })
+    };
+    let cwd = std::env::current_dir().unwrap_or_default();
+    scenes
+        .into_iter()
+        .filter(|p| {
+            let rel = p.strip_prefix(&cwd).unwrap_or(p);
+            let key = rel.to_string_lossy().replace('\\', "/");
+            fnv1a(key.trim_start_matches("./")) % n == k - 1
+        })
+        .collect()
+}
+
+/// `rendiff report`: verdicts of several runs as one.
+fn report(a: &ReportArgs) -> Result<Outcome> {
+    fn collect(path: &Path, out: &mut Vec<serde_json::Value>) -> Result<()> {
+        if path.is_dir() {
+            let mut entries: Vec<PathBuf> = std::fs::read_dir(path)
+                .with_context(|| format!("could not read {}", path.display()))?
+                .map(|e| e.map(|e| e.path()))
+                .collect::<Result<_, _>>()
+                .with_context(|| format!("could not read {}", path.display()))?;
+            entries.sort();
+            for e in entries {
+                if e.is_dir() || e.file_name().is_some_and(|n| n == "report.json") {
+                    collect(&e, out)?;
+                }
+            }
+            return Ok(());
+        }
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("could not read {}", path.display()))?;
+        let v: serde_json::Value = serde_json::from_str(&text).with_context(|| {
+            format!(
+                "{}: expected the JSON of `rendiff diff --json`",
+                path.display()
+            )
+        })?;
+        let items = match v {
+            serde_json::Value::Array(items) => items,
+            one => vec![one],
+        };
+        for item in items {
+            if item
+                .get("scene")
+                .and_then(serde_json::Value::as_str)
+                .is_none()
+                || item
+                    .get("verdict")
+                    .and_then(serde_json::Value::as_str)
+                    .is_none()
+            {
+                bail!(
+                    "{}: expected reports with \"scene\" and \"verdict\" (the JSON of `rendiff diff --json`)",
+                    path.display()
+                );
+            }
+            out.push(item);
+        }
+        Ok(())
+    }
+    let mut all = Vec::new();
+    for p in &a.inputs {
+        collect(p, &mut all)?;
+    }
+    let str_of = |v: &serde_json::Value, k: &str| v[k].as_str().unwrap_or_default().to_string();
+    all.sort_by_key(|v| (str_of(v, "scene"), str_of(v, "a"), str_of(v, "b")));
+    let failed = all.iter().filter(|v| v["verdict"] != "pass").count();
+    if a.json {
+        emit(format!("{}\n", serde_json::to_string_pretty(&all)?).as_bytes())?;
+    } else {
+        let mut text = String::new();
+        for v in &all {
+            text.push_str(&format!(
+                "{}: {} vs {}: {}\n",
+                str_of(v, "scene"),
+                str_of(v, "a"),
+                str_of(v, "b"),
+                str_of(v, "verdict")
+            ));
+        }
+        text.push_str(&format!(
+            "{} report(s): {} passed, {failed} failed\n",
+            all.len(),
+            all.len() - failed
+        ));
+        say(&text)?;
+    }
+    Ok(if failed == 0 {
+        Outcome::Ok
+    } else {
+        Outcome::Differs
+    })
 }
