@@ -116,10 +116,7 @@ pub fn assert_no_false_pass(name: &str, r: &diff::DiffResult) {
 }
 
 fn frame_of(o: &diff::Output) -> Option<&rendiff::frame::Frame> {
-    match o {
-        diff::Output::Frame(f, _) => Some(f),
-        diff::Output::Image { .. } => None,
-    }
+    o.frame()
 }
 
 /// Renders a scene's raster frame with a perturbation and classifies it

@@ -22,6 +22,8 @@ mod bumps;
 mod cli;
 /// Raster against ray on every scene, and the classifier's negative controls.
 mod differential;
+/// Another renderer's G-buffer, classified like a backend's.
+mod external;
 /// The fuzz corpora and past crashes, replayed.
 mod fuzz_corpus;
 /// Regression images per backend (golden/raster, golden/ray).

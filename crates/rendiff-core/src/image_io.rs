@@ -276,7 +276,7 @@ pub fn write_png(
 /// # Errors
 ///
 /// [`ImageIoError`] on encoding or I/O failure.
-pub(crate) fn write_png_u32(
+pub fn write_png_u32(
     path: &Path,
     width: u32,
     height: u32,
@@ -322,12 +322,7 @@ pub fn write_png_rgba8(
 /// # Errors
 ///
 /// [`ImageIoError::Io`].
-pub(crate) fn write_pfm(
-    path: &Path,
-    width: u32,
-    height: u32,
-    values: &[f32],
-) -> Result<(), ImageIoError> {
+pub fn write_pfm(path: &Path, width: u32, height: u32, values: &[f32]) -> Result<(), ImageIoError> {
     write_atomic(path, |w| {
         write!(w, "Pf\n{width} {height}\n-1.0\n")?;
         for row in (0..height as usize).rev() {
@@ -517,6 +512,152 @@ fn decode_frame(
         pixels,
         linear16,
     })
+}
+
+/// Reads a file whole after checking that it is a regular file and that
+/// its size fits `budget` (reserved: the caller releases `size` bytes).
+fn read_budgeted(path: &Path, budget: &crate::budget::Budget) -> Result<Vec<u8>, ImageIoError> {
+    let size = crate::input::regular_file_size(path).map_err(|source| ImageIoError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    budget
+        .reserve(size, || {
+            format!("reading the {} file", crate::budget::human(size))
+        })
+        .map_err(|e| png_err(path, e))?;
+    let bytes = crate::input::read_file(path).map_err(|source| ImageIoError::Io {
+        path: path.to_path_buf(),
+        source,
+    });
+    budget.release(size);
+    bytes
+}
+
+/// Reads an id image as [`crate::frame::Frame::write_gbuffer`] writes it:
+/// an RGBA8 PNG whose four bytes per pixel are a little-endian `u32`
+/// (triangle id + 1; 0 for the background). The size must be `expect`.
+///
+/// # Errors
+///
+/// [`ImageIoError`] when the file is unreadable, not an 8-bit RGBA PNG,
+/// of another size, or too large for the budget.
+pub fn read_png_u32_within(
+    path: &Path,
+    expect: (u32, u32),
+    budget: &crate::budget::Budget,
+) -> Result<Vec<u32>, ImageIoError> {
+    let bytes = read_budgeted(path, budget)?;
+    let mut reader = png_reader(&bytes, budget).map_err(|e| png_err(path, e))?;
+    let info = reader.info();
+    let (w, h) = (info.width, info.height);
+    if (w, h) != expect {
+        return Err(png_err(
+            path,
+            format!(
+                "the id image is {w}x{h} but the sample grid is {}x{}",
+                expect.0, expect.1
+            ),
+        ));
+    }
+    if info.color_type != png::ColorType::Rgba || info.bit_depth != png::BitDepth::Eight {
+        return Err(png_err(
+            path,
+            "expected an 8-bit RGBA PNG (a little-endian u32 per pixel: triangle id + 1, 0 for none)",
+        ));
+    }
+    let size = reader
+        .output_buffer_size()
+        .ok_or_else(|| png_err(path, "image too large"))?;
+    let need = u64::try_from(size).unwrap_or(u64::MAX);
+    budget
+        .reserve(need, || format!("decoding the {w}x{h} id image"))
+        .map_err(|e| png_err(path, e))?;
+    let mut buf = vec![0u8; size];
+    let result = reader.next_frame(&mut buf).map_err(|e| png_err(path, e));
+    budget.release(need);
+    result?;
+    Ok(buf
+        .chunks_exact(4)
+        .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect())
+}
+
+/// Reads a single-channel PFM (`Pf`, either byte order, rows bottom to
+/// top) as written by [`crate::frame::Frame::write_gbuffer`]'s
+/// `depth.pfm`; rows are returned top to bottom. The size must be
+/// `expect`.
+///
+/// # Errors
+///
+/// [`ImageIoError`] naming the file when it is unreadable, not a grey
+/// PFM, of another size, short, or too large for the budget.
+pub fn read_pfm_within(
+    path: &Path,
+    expect: (u32, u32),
+    budget: &crate::budget::Budget,
+) -> Result<Vec<f32>, ImageIoError> {
+    let bad = |why: String| ImageIoError::Png {
+        path: path.to_path_buf(),
+        message: why,
+    };
+    let bytes = read_budgeted(path, budget)?;
+    // The header: three whitespace-separated tokens after "Pf", then one
+    // whitespace byte before the data.
+    let mut tokens = Vec::new();
+    let mut i = 0;
+    while tokens.len() < 4 && i < bytes.len().min(256) {
+        while i < bytes.len() && bytes[i].is_ascii_whitespace() {
+            i += 1;
+        }
+        let start = i;
+        while i < bytes.len() && !bytes[i].is_ascii_whitespace() {
+            i += 1;
+        }
+        tokens.push(String::from_utf8_lossy(&bytes[start..i]).into_owned());
+    }
+    i += 1;
+    if tokens.len() < 4 || tokens[0] != "Pf" {
+        return Err(bad(
+            "expected a grey PFM (\"Pf\", width, height, scale)".into()
+        ));
+    }
+    let parse = |t: &str| {
+        t.parse::<u32>()
+            .map_err(|_| bad(format!("expected a size, got \"{t}\"")))
+    };
+    let (w, h) = (parse(&tokens[1])?, parse(&tokens[2])?);
+    let scale: f32 = tokens[3]
+        .parse()
+        .map_err(|_| bad(format!("expected the scale, got \"{}\"", tokens[3])))?;
+    if (w, h) != expect {
+        return Err(bad(format!(
+            "the depth image is {w}x{h} but the sample grid is {}x{}",
+            expect.0, expect.1
+        )));
+    }
+    let n = (w as usize) * (h as usize);
+    let data = bytes.get(i..).unwrap_or_default();
+    if data.len() < 4 * n {
+        return Err(bad(format!(
+            "the data holds {} bytes, {w}x{h} floats need {}",
+            data.len(),
+            4 * n
+        )));
+    }
+    let little = scale < 0.0;
+    let mut out = vec![0.0f32; n];
+    for (k, c) in data.chunks_exact(4).take(n).enumerate() {
+        let b = [c[0], c[1], c[2], c[3]];
+        let v = if little {
+            f32::from_le_bytes(b)
+        } else {
+            f32::from_be_bytes(b)
+        };
+        let (row, col) = (k / w as usize, k % w as usize);
+        out[(h as usize - 1 - row) * w as usize + col] = v;
+    }
+    Ok(out)
 }
 
 #[cfg(test)]

@@ -19,6 +19,14 @@ pub enum Side {
     Backend(Backend),
     /// A stored image (read as linear when 16-bit with gAMA 1.0, else sRGB).
     Image(PathBuf),
+    /// Another renderer's G-buffer: a folder with `color.png` (the colour
+    /// of every sample), `id.png` (rendiff's triangle id + 1 per sample as
+    /// a little-endian u32 in RGBA8, 0 for the background) and `depth.pfm`
+    /// (`t` along the unit primary ray, +∞ for the background), all at the
+    /// scene's sample grid — the files `rendiff render --gbuffer` writes,
+    /// with the picture as `color.png`. Its disagreements are classified
+    /// like a backend's.
+    External(PathBuf),
     /// The POV-Ray reference: stored in the golden folder, or rendered now.
     Pov {
         /// The folder of the stored references (`golden/pov`).
@@ -35,6 +43,9 @@ impl Side {
     ///
     /// A message naming the accepted values.
     pub fn parse(s: &str) -> Result<Side, String> {
+        if Path::new(s).is_dir() {
+            return Ok(Side::External(PathBuf::from(s)));
+        }
         if s.contains('.') || s.contains('/') {
             return Ok(Side::Image(PathBuf::from(s)));
         }
@@ -46,7 +57,7 @@ impl Side {
         }
         s.parse::<Backend>().map(Side::Backend).map_err(|_| {
             format!(
-                "unknown side \"{s}\"; expected a backend (raster, ray, painter), pov, or a PATH.png"
+                "unknown side \"{s}\"; expected a backend (raster, ray, painter), pov, a PATH.png, or a G-buffer folder"
             )
         })
     }
@@ -54,7 +65,7 @@ impl Side {
     fn label(&self) -> String {
         match self {
             Side::Backend(b) => b.to_string(),
-            Side::Image(p) => p.display().to_string(),
+            Side::Image(p) | Side::External(p) => p.display().to_string(),
             Side::Pov { .. } => "pov".to_string(),
         }
     }
@@ -82,19 +93,25 @@ pub enum Output {
         /// How long POV-Ray took, when it rendered the image just now.
         rendered_ms: Option<f64>,
     },
+    /// Another renderer's G-buffer ([`Side::External`]) as a frame, and how
+    /// its colours were stored.
+    External(Frame, compare::Quantisation),
 }
 
 impl Output {
     fn pixels(&self) -> &[Rgb] {
         match self {
-            Output::Frame(f, _) => &f.color,
+            Output::Frame(f, _) | Output::External(f, _) => &f.color,
             Output::Image { pixels, .. } => pixels,
         }
     }
 
-    fn frame(&self) -> Option<&Frame> {
+    /// The frame of a side that has one (a backend's, another renderer's
+    /// G-buffer).
+    #[must_use]
+    pub fn frame(&self) -> Option<&Frame> {
         match self {
-            Output::Frame(f, _) => Some(f),
+            Output::Frame(f, _) | Output::External(f, _) => Some(f),
             Output::Image { .. } => None,
         }
     }
@@ -102,6 +119,7 @@ impl Output {
     fn quantisation(&self) -> compare::Quantisation {
         match self {
             Output::Frame(..) => compare::Quantisation::Exact,
+            Output::External(_, q) => *q,
             Output::Image { linear16: true, .. } => compare::Quantisation::Linear16,
             Output::Image { .. } => compare::Quantisation::Srgb8,
         }
@@ -110,6 +128,7 @@ impl Output {
     fn time(&self) -> Option<f64> {
         match self {
             Output::Frame(_, t) => Some(*t),
+            Output::External(..) => None,
             Output::Image { rendered_ms, .. } => *rendered_ms,
         }
     }
@@ -276,6 +295,10 @@ fn produce(job: &Prepared, side: &Side, max_depth: u32) -> Result<(Output, Optio
             };
             return Ok((Output::Frame(r.frame, r.time_ms), note));
         }
+        Side::External(dir) => {
+            let (frame, q) = read_external(job, dir)?;
+            Output::External(frame, q)
+        }
         Side::Image(p) => {
             // The header's size is compared with the scene's before the
             // image is decoded (a PNG may claim 60000×60000 in 3 MB).
@@ -384,6 +407,57 @@ pub fn diff_image_data(
     }
 }
 
+/// Reads another renderer's G-buffer folder ([`Side::External`]) as a
+/// frame of this scene.
+fn read_external(job: &Prepared, dir: &Path) -> Result<(Frame, compare::Quantisation), Error> {
+    let cam = &job.tri.camera;
+    let grid = (cam.sample_width(), cam.sample_height());
+    let color = image_io::read_png_linear_within(&dir.join("color.png"), Some(grid), &job.budget)?;
+    let id_path = dir.join("id.png");
+    let ids = image_io::read_png_u32_within(&id_path, grid, &job.budget)?;
+    let depth = image_io::read_pfm_within(&dir.join("depth.pfm"), grid, &job.budget)?;
+    let n = u32::try_from(job.tri.len()).unwrap_or(u32::MAX);
+    let mut frame = Frame::new(cam.width(), cam.height(), cam.samples(), job.tri.background);
+    for (i, (&id, &d)) in ids.iter().zip(&depth).enumerate() {
+        let sw = grid.0 as usize;
+        if id > n {
+            return Err(Error::Usage(format!(
+                "{}: sample ({}, {}) names triangle {} but the scene has {n} triangles (ids are rendiff's, + 1; 0 is the background)",
+                id_path.display(),
+                i % sw,
+                i / sw,
+                id - 1
+            )));
+        }
+        if !(d.is_finite() || d == f32::INFINITY) || (id != 0 && !d.is_finite()) {
+            return Err(Error::Usage(format!(
+                "{}: sample ({}, {}) has depth {d}; expected a finite t for a surface, +inf for the background",
+                dir.join("depth.pfm").display(),
+                i % sw,
+                i / sw
+            )));
+        }
+    }
+    frame.id = ids.iter().map(|&i| i.wrapping_sub(1)).collect();
+    frame.depth = depth;
+    let quantisation = if color.linear16 {
+        compare::Quantisation::Linear16
+    } else {
+        compare::Quantisation::Srgb8
+    };
+    let finite = |c: crate::color::Rgb| {
+        let f = |v: f32| if v.is_finite() { v } else { 0.0 };
+        crate::color::Rgb::new(f(c.r), f(c.g), f(c.b))
+    };
+    if cam.samples() == 1 {
+        frame.color = color.pixels.into_iter().map(finite).collect();
+    } else {
+        frame.sample_color = color.pixels.into_iter().map(finite).collect();
+        frame.resolve();
+    }
+    Ok((frame, quantisation))
+}
+
 /// Renders (or reads) both sides and compares them.
 ///
 /// # Errors
@@ -442,11 +516,17 @@ pub fn diff_with(
     notes.extend(note_a);
     notes.extend(note_b);
     let cam = &job.tri.camera;
-    let (comparison, image_tol_used) = match (&out_a, &out_b) {
-        (Output::Frame(fa, _), Output::Frame(fb, _)) => (
-            compare::compare_frames(&job.tri, fa, fb, &tol, job.settings.depth),
-            None,
-        ),
+    let (comparison, image_tol_used) = match (out_a.frame(), out_b.frame()) {
+        (Some(fa), Some(fb)) => {
+            let tol = Tolerances {
+                quantisation: [out_a.quantisation(), out_b.quantisation()],
+                ..tol
+            };
+            (
+                compare::compare_frames(&job.tri, fa, fb, &tol, job.settings.depth),
+                None,
+            )
+        }
         _ => {
             // Against a stored image the shading bound is the frames' (0:
             // the same inputs give the same colour) beyond each image's

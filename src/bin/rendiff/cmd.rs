@@ -648,7 +648,7 @@ fn diff_inputs(jobs: &[(String, Prepared)], sides: [&rendiff::diff::Side; 2]) ->
         .collect();
     for side in sides {
         match side {
-            Side::Image(p) => inputs.push(p.clone()),
+            Side::Image(p) | Side::External(p) => inputs.push(p.clone()),
             Side::Pov {
                 golden_dir,
                 render: false,

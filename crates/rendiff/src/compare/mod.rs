@@ -47,6 +47,10 @@ pub struct Tolerances {
     /// (the same weights from `TriScene::view_weights`, the same ray
     /// direction, the same shadow queries) through one function.
     pub shading_max: f64,
+    /// How each frame's colours were stored: exact for a backend's frame,
+    /// a PNG's code for another renderer's G-buffer (whose colour
+    /// differences then count only beyond that rounding).
+    pub quantisation: [Quantisation; 2],
 }
 
 /// A distribution of per-sample tolerances: its largest value and 99th
@@ -253,6 +257,7 @@ pub fn image_tolerances() -> Tolerances {
         near_rel_limit: oracle::CLIP_ERROR_MAX_REL,
         gate_eps: f64::from(crate::shade::GATE_EPS),
         shading_max: 0.0,
+        quantisation: [Quantisation::Exact; 2],
     }
 }
 
@@ -307,7 +312,7 @@ pub fn compare_frames(
         .into_par_iter()
         .map(|sy| {
             (0..sw)
-                .map(|sx| judge_sample(&oracle, a, b, sx, sy))
+                .map(|sx| judge_sample(&oracle, (a, b), tol.quantisation, sx, sy))
                 .collect()
         })
         .collect();
@@ -354,7 +359,13 @@ pub fn compare_frames(
 /// One sample of two frames: where the ids differ, the oracle's verdict;
 /// where they agree, the colour error and whether the sample is a tie (a
 /// discontinuity, or a shadow edge both frames place within a sample).
-fn judge_sample(oracle: &Oracle<'_>, a: &Frame, b: &Frame, sx: u32, sy: u32) -> SampleVerdict {
+fn judge_sample(
+    oracle: &Oracle<'_>,
+    (a, b): (&Frame, &Frame),
+    quant: [Quantisation; 2],
+    sx: u32,
+    sy: u32,
+) -> SampleVerdict {
     let i = (sy as usize) * (a.sample_width() as usize) + sx as usize;
     let (ia, ib) = (a.id[i], b.id[i]);
     let opt = |id: u32| (id != BACKGROUND).then_some(id);
@@ -363,7 +374,12 @@ fn judge_sample(oracle: &Oracle<'_>, a: &Frame, b: &Frame, sx: u32, sy: u32) -> 
         let j = oracle.judge(x, y, opt(ia), opt(ib));
         return (j.class, f32::NAN, false, Some(j));
     }
-    let err = sample_error(a.sample_colors()[i], b.sample_colors()[i]);
+    let (ca, cb) = (a.sample_colors()[i], b.sample_colors()[i]);
+    let err = if quant == [Quantisation::Exact; 2] {
+        sample_error(ca, cb)
+    } else {
+        quantised_error(ca, cb, quant)
+    };
     let (fa, fb) = (a.flags[i], b.flags[i]);
     let mut tie = (fa | fb) & FLAG_DISCONTINUITY != 0;
     let shadow_diff = (fa ^ fb) & !FLAG_DISCONTINUITY;
@@ -436,7 +452,8 @@ fn shading_stats(
 
 /// How a side's colours were stored: what a value read back can have
 /// been before it was rounded.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
 pub enum Quantisation {
     /// Rendered now: the value is exact.
     Exact,
