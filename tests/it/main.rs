@@ -46,6 +46,8 @@ mod quantised;
 mod raster;
 /// The ray tracer: BVH, watertightness, self-hits, threads, shading.
 mod ray;
+/// The README's examples print what it shows.
+mod readme;
 /// Resource bounds: memory per triangle and per sample, the budget.
 mod resources;
 /// `--shard K/N` and `rendiff report`: suites split across machines.
