@@ -921,12 +921,17 @@ pub fn describe(job: &Prepared) -> String {
         let b = info.bounds;
         let _ = writeln!(
             o,
-            "  {}: {} triangles{}, {}{}{}, bounds {:?} .. {:?}",
+            "  {}: {} triangles{}{}, {}{}{}, bounds {:?} .. {:?}",
             info.label,
             info.tris.len(),
             info.segments
                 .map(|n| format!(" ({n} segments)"))
                 .unwrap_or_default(),
+            if info.tris.is_empty() {
+                String::new()
+            } else {
+                format!(", ids {}-{}", info.tris.start, info.tris.end - 1)
+            },
             if info.closed { "closed" } else { "open" },
             if info.smooth { ", smooth" } else { "" },
             if info.no_shadow { ", no_shadow" } else { "" },
