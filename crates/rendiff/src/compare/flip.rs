@@ -918,6 +918,30 @@ mod tests {
         assert!(magma_picture(2, 2, &[0.0; 3]).is_none());
     }
 
+    #[test]
+    fn flip_magma_picture_is_the_reference_tools() {
+        let dir = data_dir();
+        let (w, h, a) = read_png(&dir.join("shapes.ref.png"));
+        let (_, _, b) = read_png(&dir.join("shapes.test.png"));
+        let (map, _) = flip(&a, &b, w, h, DEFAULT_PPD).expect("sizes");
+        let ours = magma_picture(w, h, &map).expect("sizes");
+        let bytes = std::fs::read(dir.join("shapes.default.magma.png")).expect("picture");
+        let mut reader = png::Decoder::new(std::io::Cursor::new(bytes))
+            .read_info()
+            .expect("png header");
+        let mut buf = vec![0; reader.output_buffer_size().expect("size")];
+        let info = reader.next_frame(&mut buf).expect("png data");
+        assert_eq!(
+            (info.width, info.height, info.color_type),
+            (w, h, png::ColorType::Rgb)
+        );
+        let theirs: Vec<u8> = buf[..info.buffer_size()]
+            .chunks(3)
+            .flat_map(|p| [p[0], p[1], p[2], 255])
+            .collect();
+        assert_eq!(ours.rgba, theirs);
+    }
+
     /// `cargo test -p rendiff flip_timing -- --ignored --nocapture`.
     #[test]
     #[ignore = "a timing, not a check"]
