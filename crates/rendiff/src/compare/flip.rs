@@ -21,11 +21,13 @@
 //!
 //! The reference implementation is NVlabs/flip (<https://github.com/NVlabs/flip>,
 //! BSD-3-Clause, © NVIDIA); its C++ `FLIP.h` (v1.7) is where each constant
-//! below was read. No code was copied: this is written from the paper and
-//! the constants. Every filter is separable, as in the reference (the
-//! blue–yellow sum of two Gaussians is two separable passes, per the
-//! repository's `misc/separatedConvolutions.pdf`), with the edge pixel
-//! repeated past the borders, as the reference does.
+//! below was read. No code was copied: the algorithm is re-expressed here
+//! with the reference's constants. Every filter is separable, as in the
+//! reference (the blue–yellow sum of two Gaussians is two separable
+//! passes, per the repository's `misc/separatedConvolutions.pdf`), with
+//! the edge pixel repeated past the borders, as the reference does. The
+//! arithmetic is `f32` in the reference's order of operations, so the maps
+//! agree with its to the bit on the test pairs.
 //!
 //! The reference's C++ API takes linear RGB (its tool decodes sRGB PNGs
 //! first); so does [`flip`]: the caller's linear values are clamped to
@@ -46,8 +48,8 @@ use crate::color::Rgb;
 /// 67.02; the reference evaluates it in `f32`, 67.020645).
 pub const DEFAULT_PPD: f64 = 0.7 * (3840.0 / 0.7) * std::f64::consts::PI / 180.0;
 
-// The FLIP constants (`FLIP::xFLIPConstants` in FLIP.h; the paper, §4 and
-// Table 1).
+// The FLIP constants (`FLIP::xFLIPConstants` in FLIP.h, the values the
+// paper gives).
 /// `q_c`: the exponent on the HyAB colour difference.
 const QC: f32 = 0.7;
 /// `p_c`: the fraction of `c_max` where the colour remap bends.
@@ -62,7 +64,7 @@ const QF: f32 = 0.5;
 
 /// The contrast sensitivity functions, per channel (Y, Cx, Cz), as sums of
 /// two Gaussians `a · √(π/b) · exp(−π² x² / b)` in degrees
-/// (`FLIP::xGaussianConstants`; the paper, Table 1). Y and Cx have a
+/// (`FLIP::xGaussianConstants` in FLIP.h). Y and Cx have a
 /// single Gaussian (`a2` = 0; the reference sets `b2` = 1e-5 only to keep
 /// the formula finite).
 const CSF_A1: [f32; 3] = [1.0, 1.0, 34.1];
