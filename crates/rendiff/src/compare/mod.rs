@@ -8,6 +8,7 @@
 //! whose shading flags say they sit on a discontinuity are shading ties.
 
 pub mod explain;
+pub mod flip;
 pub mod maps;
 pub mod metrics;
 pub mod oracle;
