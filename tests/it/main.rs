@@ -42,6 +42,9 @@ mod povray;
 mod raster;
 /// The ray tracer: BVH, watertightness, self-hits, threads, shading.
 mod ray;
+/// The interactive HTML report driven in headless Chromium: toggle,
+/// hover values, cluster zoom, legends.
+mod report_browser;
 /// Resource bounds: memory per triangle and per sample, the budget.
 mod resources;
 /// Tessellation: chord error bounds and closedness.

@@ -513,7 +513,7 @@ fn diff(a: &DiffArgs) -> Result<Outcome> {
             } else {
                 od.path().to_path_buf()
             };
-            diff::write_outputs(&r, &target, encoding(&a.flags)).map_err(|e| match e {
+            diff::write_outputs(&r, job, &target, encoding(&a.flags)).map_err(|e| match e {
                 rendiff::Error::Image(e) => rendiff::Error::Image(od.relabel(e)),
                 e => e,
             })?;
