@@ -13,7 +13,9 @@
 //! view to the cluster's box. Opened as `index.html#selftest` (or
 //! `#selftest=X,Y` to hover pixel X, Y) the script drives itself through
 //! real DOM events and writes what it saw into `<pre id="selftest">` as
-//! JSON, for headless browser tests.
+//! JSON, for headless browser tests; `#cluster=N` opens zoomed onto the
+//! N-th listed cluster and `#view=side` or `#view=diff` in that view
+//! (combined with `&`: links a review can quote).
 
 use std::fmt::Write as _;
 
@@ -355,7 +357,7 @@ fn cluster_rows(r: &Report) -> String {
     for (k, c) in r.clusters.list.iter().enumerate() {
         let _ = write!(
             o,
-            "<tr class=\"cl k-{kind}\" data-box=\"{},{},{},{}\" tabindex=\"0\"><td>{}</td><td>{kind}</td><td>{}..={}, {}..={}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+            "<tr class=\"cl k-{kind}\" data-box=\"{},{},{},{}\" tabindex=\"0\"><td>{}</td><td>{kind}</td><td class=\"box\">x {}–{}, y {}–{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
             c.bbox.x0,
             c.bbox.y0,
             c.bbox.x1,
@@ -408,13 +410,13 @@ pub fn scene_page(r: &Report, p: &PageInput<'_>) -> String {
     o.push_str("<div class=\"toolbar\">view: <button data-mode=\"ab\" title=\"1\">A/B</button><button data-mode=\"side\" title=\"2\">side by side</button><button data-mode=\"diff\" title=\"3\">difference</button> \
         <button id=\"toggle\" title=\"space or t\">show B</button> <label><input type=\"checkbox\" id=\"flicker\"> flicker (f)</label> \
         · zoom <button id=\"zout\" title=\"-\">−</button><span id=\"zoomv\">1×</span><button id=\"zin\" title=\"+\">+</button><button id=\"zfit\" title=\"0\">fit</button> \
-        <span class=\"keys\">keys: space/t toggle, f flicker, 1 2 3 views, + − 0 zoom</span></div>\n<div id=\"views\">\n");
+        <span class=\"keys\">keys: space/t toggle, f flicker, 1 2 3 views, + − 0 zoom</span></div>\n<div class=\"main\"><div id=\"views\">\n");
     let src = |key: &str| p.images.iter().find(|i| i.key == key);
     let mut panel = |id: &str, key: &str, modes: &str, caption: &str, legend: &str| {
         if let Some(img) = src(key) {
-            let _ = write!(
+            let _ = writeln!(
                 o,
-                "<figure class=\"panel\" id=\"p-{id}\" data-modes=\"{modes}\"><figcaption id=\"cap-{id}\">{}</figcaption><div class=\"vp\"><div class=\"stack\"><img id=\"img-{id}\" src=\"{}\" alt=\"{}\" data-shown=\"{key}\"><div class=\"hl\"></div><div class=\"cur\"></div></div></div>{legend}</figure>\n",
+                "<figure class=\"panel\" id=\"p-{id}\" data-modes=\"{modes}\"><figcaption id=\"cap-{id}\">{}</figcaption><div class=\"vp\"><div class=\"stack\"><img id=\"img-{id}\" src=\"{}\" alt=\"{}\" data-shown=\"{key}\"><div class=\"hl\"></div><div class=\"cur\"></div></div></div>{legend}</figure>",
                 esc(caption),
                 esc(&crate::escape::href(&img.file)),
                 esc(caption)
@@ -436,7 +438,7 @@ pub fn scene_page(r: &Report, p: &PageInput<'_>) -> String {
     if r.visibility.is_some() {
         panel("vis", "vis", "diff", "visibility classes", &vis_legend(r));
     }
-    o.push_str("</div>\n<div id=\"info\" class=\"info\">Hover a pixel for its values.</div>\n<h2>Clusters</h2>\n");
+    o.push_str("</div>\n<div id=\"info\" class=\"info\">Hover a pixel for its values.</div></div>\n<h2>Clusters</h2>\n");
     o.push_str(&cluster_rows(r));
     o.push_str("\n<h2>Summary</h2>\n<pre class=\"summary\">");
     o.push_str(&esc(&r.summary()));
@@ -483,9 +485,9 @@ figcaption{font-size:90%;color:#ccc;margin-bottom:3px;overflow-wrap:anywhere}.vp
 .cur{position:absolute;outline:1px solid #fff;box-shadow:0 0 0 1px #000;display:none;pointer-events:none}\
 .scale{font-size:80%;color:#bbb;margin-top:4px;max-width:420px}.bar{display:flex;height:12px;border:1px solid #555}.bar span{flex:1}\
 .ticks{display:flex;justify-content:space-between;gap:6px}.sw{display:inline-block;margin-right:10px}.sw i{display:inline-block;width:11px;height:11px;border:1px solid #666;vertical-align:middle;margin-right:3px}\
-.note{margin:2px 0;color:#999}.info{background:#111;padding:.5em 1em;margin-top:10px;font-family:monospace;font-size:90%;min-height:3em;overflow-wrap:anywhere}\
+.note{margin:2px 0;color:#999}.main{display:flex;flex-wrap:wrap;gap:12px;align-items:flex-start}.info{flex:1 1 280px;background:#111;padding:.5em 1em;margin-top:20px;font-family:monospace;font-size:90%;min-height:3em;overflow-wrap:anywhere}\
 .info table td{padding:0 10px 0 0;border:none}table{border-collapse:collapse}td,th{padding:3px 8px;border-bottom:1px solid #333;text-align:left;vertical-align:top}\
-tr.cl{cursor:pointer}tr.cl:hover,tr.cl.sel{background:#334}.k-real td:nth-child(2),.k-unjudgeable td:nth-child(2),.k-shading td:nth-child(2){color:#f66}.ids{color:#999;font-size:85%}\
+tr.cl{cursor:pointer}tr.cl:hover,tr.cl.sel{background:#334}.k-real td:nth-child(2),.k-unjudgeable td:nth-child(2),.k-shading td:nth-child(2){color:#f66}.ids{color:#999;font-size:85%}td.box{white-space:nowrap}\
 pre.summary{background:#111;padding:1em;white-space:pre-wrap;overflow-wrap:anywhere}img.composite{max-width:100%;height:auto;image-rendering:pixelated}";
 
 /// The page's script; `__SRC__` is replaced by the JSON `[a, b]` file names.
@@ -501,7 +503,7 @@ var P={c8a:dec(D.c8a,Uint8Array),c8b:dec(D.c8b,Uint8Array),la:dec(D.la,Float32Ar
 var panels=[].slice.call(document.querySelectorAll('figure.panel'));
 function $(id){return document.getElementById(id);}
 function visible(){return panels.filter(function(p){return !p.classList.contains('off');});}
-function avail(){var n=Math.max(1,visible().length);var vw=$('views').clientWidth||document.body.clientWidth;return [Math.max(64,Math.floor((vw-12*(n-1))/n)-2),Math.max(64,Math.floor(window.innerHeight*0.7))];}
+function avail(){var n=Math.max(1,visible().length);var vw=document.body.clientWidth-(mode==='ab'?312:0);return [Math.max(64,Math.floor((vw-12*(n-1))/n)-2),Math.max(64,Math.floor(window.innerHeight*0.7))];}
 function layout(){var a=avail();panels.forEach(function(p){var vp=p.querySelector('.vp'),st=p.querySelector('.stack');st.style.width=W*zoom+'px';st.style.height=H*zoom+'px';
  vp.style.width=Math.min(W*zoom,a[0])+'px';vp.style.height=Math.min(H*zoom,a[1])+'px';});$('zoomv').textContent=zoom+'×';placeBox();}
 function fitZoom(){var a=avail(),z=1;ZL.forEach(function(l){if(W*l<=a[0]&&H*l<=a[1])z=l;});return z;}
@@ -570,4 +572,6 @@ function selftest(arg){var out={};try{
  }catch(e){out.error=String(e);}
  var pre=$('selftest');pre.textContent=JSON.stringify(out);pre.hidden=false;}
 var m=/^#selftest(?:=(\d+,\d+))?$/.exec(location.hash);if(m)selftest(m[1]);
+else{var q=new URLSearchParams(location.hash.slice(1)),vw=q.get('view'),cn=q.get('cluster');if(vw){var vb=document.querySelector('[data-mode="'+vw+'"]');if(vb)vb.click();}
+ if(cn){var row=document.querySelectorAll('tr.cl')[+cn-1];if(row)row.click();}}
 })();"#;
