@@ -14,8 +14,9 @@
 //! `#selftest=X,Y` to hover pixel X, Y) the script drives itself through
 //! real DOM events and writes what it saw into `<pre id="selftest">` as
 //! JSON, for headless browser tests; `#cluster=N` opens zoomed onto the
-//! N-th listed cluster and `#view=side` or `#view=diff` in that view
-//! (combined with `&`: links a review can quote).
+//! N-th listed cluster, `#view=side` or `#view=diff` in that view and
+//! `#hover=X,Y` with pixel X, Y's values shown (combined with `&`: links
+//! a review can quote).
 
 use std::fmt::Write as _;
 
@@ -253,7 +254,7 @@ fn pixel_data(r: &Report, p: &PageInput<'_>) -> serde_json::Value {
 }
 
 /// The colour scale of the heat map (`maps::heat_map`'s formula).
-fn heat_legend(tolerance: f64) -> String {
+fn heat_legend(tolerance: f64, largest: f64, frames: bool) -> String {
     let tol = tolerance.max(1e-12);
     let mut o = String::from("<div class=\"scale\">");
     if tol > 1e-7 {
@@ -276,10 +277,17 @@ fn heat_legend(tolerance: f64) -> String {
             tol * 100.0
         );
     }
-    o.push_str("<div class=\"sw\"><i style=\"background:#000\"></i>equal (≤ 1e-7)</div><div class=\"sw\"><i style=\"background:rgb(110,110,110)\"></i>shading tie</div>");
-    o.push_str("<div class=\"sw\"><i style=\"background:rgb(70,0,0)\"></i>not compared (different surfaces: see the visibility map)</div>");
-    o.push_str(
-        "<p class=\"note\">Largest linear channel difference per pixel, log scale.</p></div>",
+    o.push_str("<div class=\"sw\"><i style=\"background:#000\"></i>equal (≤ 1e-7)</div>");
+    // Ties and uncompared samples exist only between two frames.
+    if frames {
+        o.push_str(
+            "<div class=\"sw\"><i style=\"background:rgb(110,110,110)\"></i>shading tie</div>",
+        );
+        o.push_str("<div class=\"sw\"><i style=\"background:rgb(70,0,0)\"></i>not compared (different surfaces: see the visibility map)</div>");
+    }
+    let _ = write!(
+        o,
+        "<p class=\"note\">Largest linear channel difference per pixel, log scale; the largest here: {largest:.3e}.</p></div>"
     );
     o
 }
@@ -433,7 +441,11 @@ pub fn scene_page(r: &Report, p: &PageInput<'_>) -> String {
         "heat",
         "diff",
         "shading error (heat map)",
-        &heat_legend(r.tolerance.shading_max),
+        &heat_legend(
+            r.tolerance.shading_max,
+            r.shading.max,
+            r.visibility.is_some(),
+        ),
     );
     if r.visibility.is_some() {
         panel("vis", "vis", "diff", "visibility classes", &vis_legend(r));
@@ -550,6 +562,8 @@ document.addEventListener('keydown',function(e){if(e.target&&e.target.tagName===
  if(k===' '||k==='t'){e.preventDefault();$('toggle').click();}else if(k==='f'){setFlicker(!$('flicker').checked);}else if(k==='+'||k==='='){step(1);}else if(k==='-'){step(-1);}else if(k==='0'){$('zfit').click();}
  else if(k==='1'||k==='2'||k==='3'){var b=document.querySelector('[data-mode="'+['ab','side','diff'][+k-1]+'"]');if(b)b.click();}});
 setMode('ab');zoom=fitZoom();layout();show('a');
+function hoverAt(p,x,y){var st=p.querySelector('.stack'),r=st.getBoundingClientRect();
+ st.dispatchEvent(new MouseEvent('mousemove',{bubbles:true,clientX:r.left+(x+0.5)*zoom,clientY:r.top+(y+0.5)*zoom}));}
 function selftest(arg){var out={};try{
  out.shown_before=$('img-ab').getAttribute('data-shown');
  $('toggle').dispatchEvent(new MouseEvent('click',{bubbles:true}));
@@ -557,8 +571,7 @@ function selftest(arg){var out={};try{
  document.dispatchEvent(new KeyboardEvent('keydown',{key:'t',bubbles:true}));out.shown_after_key=$('img-ab').getAttribute('data-shown');
  var xy=arg?arg.split(',').map(Number):null;var cl=document.querySelector('tr.cl');
  if(!xy&&D.clusters.length){var c=D.clusters[0];xy=[c[0],c[1]];}if(!xy)xy=[0,0];
- var st=$('p-ab').querySelector('.stack'),r=st.getBoundingClientRect();
- st.dispatchEvent(new MouseEvent('mousemove',{bubbles:true,clientX:r.left+(xy[0]+0.5)*zoom,clientY:r.top+(xy[1]+0.5)*zoom}));
+ hoverAt($('p-ab'),xy[0],xy[1]);
  var cells={};[].forEach.call(document.querySelectorAll('#info tr[data-k]'),function(tr){cells[tr.getAttribute('data-k')]=[].slice.call(tr.children,1).map(function(td){return td.textContent;});});
  out.hover={x:xy[0],y:xy[1],cells:cells};
  var guard=0;while(zoom>1&&guard++<32)$('zout').click();out.zoom_before_cluster=zoom;
@@ -573,5 +586,6 @@ function selftest(arg){var out={};try{
  var pre=$('selftest');pre.textContent=JSON.stringify(out);pre.hidden=false;}
 var m=/^#selftest(?:=(\d+,\d+))?$/.exec(location.hash);if(m)selftest(m[1]);
 else{var q=new URLSearchParams(location.hash.slice(1)),vw=q.get('view'),cn=q.get('cluster');if(vw){var vb=document.querySelector('[data-mode="'+vw+'"]');if(vb)vb.click();}
- if(cn){var row=document.querySelectorAll('tr.cl')[+cn-1];if(row)row.click();}}
+ if(cn){var row=document.querySelectorAll('tr.cl')[+cn-1];if(row)row.click();}
+ var hv=/^(\d+),(\d+)$/.exec(q.get('hover')||'');if(hv&&visible()[0])hoverAt(visible()[0],+hv[1],+hv[2]);}
 })();"#;
