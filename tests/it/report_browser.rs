@@ -331,6 +331,16 @@ fn the_report_page_of_a_frame_against_an_image_lists_the_changed_pixel() {
         serde_json::json!({"x0": x, "y0": y, "x1": x, "y1": y})
     );
     assert!(list[0]["b"].as_array().unwrap().is_empty());
+    // The summary keeps its lines (and wraps them: CSS).
+    let html = std::fs::read_to_string(out.join("index.html")).unwrap();
+    assert!(
+        !html.contains("&#xfffd;"),
+        "a control character was escaped"
+    );
+    assert!(
+        html.contains("\n  verdict: pass"),
+        "the summary's lines are kept"
+    );
     let v = selftest(
         &browser,
         &out.join("index.html"),

@@ -261,7 +261,7 @@ fn heat_legend(tolerance: f64, largest: f64, frames: bool) -> String {
         let _ = write!(
             o,
             "<div class=\"bar\"><span style=\"background:linear-gradient(to right,rgb(0,0,80),rgb(0,200,255))\"></span><span style=\"background:linear-gradient(to right,rgb(255,0,0),rgb(255,230,0))\"></span></div>\
-             <div class=\"ticks\"><span>1e-7</span><span>{:.1e} (tolerance)</span><span>{:.1e}</span><span>≥ {:.1e}</span></div>",
+             <div class=\"ticks\"><span style=\"left:0\">1e-7</span><span style=\"left:50%\">{:.1e} (tolerance)</span><span style=\"left:75%\">{:.1e}</span><span style=\"left:100%\">≥ {:.1e}</span></div>",
             tol,
             tol * 10.0,
             tol * 100.0
@@ -270,7 +270,7 @@ fn heat_legend(tolerance: f64, largest: f64, frames: bool) -> String {
         let _ = write!(
             o,
             "<div class=\"bar\"><span style=\"background:linear-gradient(to right,rgb(255,0,0),rgb(255,230,0))\"></span></div>\
-             <div class=\"ticks\"><span>&gt; {:.1e} (tolerance {})</span><span>{:.1e}</span><span>≥ {:.1e}</span></div>",
+             <div class=\"ticks\"><span style=\"left:0\">&gt; {:.1e} (tolerance {})</span><span style=\"left:50%\">{:.1e}</span><span style=\"left:100%\">≥ {:.1e}</span></div>",
             tol,
             tolerance,
             tol * 10.0,
@@ -453,7 +453,10 @@ pub fn scene_page(r: &Report, p: &PageInput<'_>) -> String {
     o.push_str("</div>\n<div id=\"info\" class=\"info\">Hover a pixel for its values.</div></div>\n<h2>Clusters</h2>\n");
     o.push_str(&cluster_rows(r));
     o.push_str("\n<h2>Summary</h2>\n<pre class=\"summary\">");
-    o.push_str(&esc(&r.summary()));
+    // Line by line: the escape turns control characters (a newline too)
+    // into U+FFFD.
+    let summary: Vec<String> = r.summary().lines().map(esc).collect();
+    o.push_str(&summary.join("\n"));
     o.push_str("</pre>\n");
     if let Some(c) = src("composite") {
         let _ = writeln!(
@@ -495,8 +498,8 @@ figcaption{font-size:90%;color:#ccc;margin-bottom:3px;overflow-wrap:anywhere}.vp
 .stack{position:relative}.stack img{display:block;width:100%;height:100%;image-rendering:pixelated;image-rendering:crisp-edges}\
 .hl{position:absolute;border:2px solid #ff0;box-shadow:0 0 0 1px #000;display:none;pointer-events:none;box-sizing:border-box}\
 .cur{position:absolute;outline:1px solid #fff;box-shadow:0 0 0 1px #000;display:none;pointer-events:none}\
-.scale{font-size:80%;color:#bbb;margin-top:4px;max-width:420px}.bar{display:flex;height:12px;border:1px solid #555}.bar span{flex:1}\
-.ticks{display:flex;justify-content:space-between;gap:6px}.sw{display:inline-block;margin-right:10px}.sw i{display:inline-block;width:11px;height:11px;border:1px solid #666;vertical-align:middle;margin-right:3px}\
+.scale{font-size:80%;color:#bbb;margin-top:4px;max-width:420px}.bar{display:flex;height:12px;border:1px solid #555;margin:0 2em 0 1em}.bar span{flex:1}\
+.ticks{position:relative;height:1.3em;margin:0 2em 0 1em}.ticks span{position:absolute;transform:translateX(-50%);white-space:nowrap}.ticks span:first-child{transform:none}.ticks span:last-child{transform:translateX(-100%)}.sw{display:inline-block;margin-right:10px}.sw i{display:inline-block;width:11px;height:11px;border:1px solid #666;vertical-align:middle;margin-right:3px}\
 .note{margin:2px 0;color:#999}.main{display:flex;flex-wrap:wrap;gap:12px;align-items:flex-start}.info{flex:1 1 280px;background:#111;padding:.5em 1em;margin-top:20px;font-family:monospace;font-size:90%;min-height:3em;overflow-wrap:anywhere}\
 .info table td{padding:0 10px 0 0;border:none}table{border-collapse:collapse}td,th{padding:3px 8px;border-bottom:1px solid #333;text-align:left;vertical-align:top}\
 tr.cl{cursor:pointer}tr.cl:hover,tr.cl.sel{background:#334}.k-real td:nth-child(2),.k-unjudgeable td:nth-child(2),.k-shading td:nth-child(2){color:#f66}.ids{color:#999;font-size:85%}td.box{white-space:nowrap}\
