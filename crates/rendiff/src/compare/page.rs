@@ -277,7 +277,11 @@ fn heat_legend(tolerance: f64, largest: f64, frames: bool) -> String {
             tol * 100.0
         );
     }
-    o.push_str("<div class=\"sw\"><i style=\"background:#000\"></i>equal (≤ 1e-7)</div>");
+    let _ = write!(
+        o,
+        "<div class=\"sw\"><i style=\"background:#000\"></i>equal (≤ {:.0e})</div>",
+        tol.min(1e-7)
+    );
     // Ties and uncompared samples exist only between two frames.
     if frames {
         o.push_str(
