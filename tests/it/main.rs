@@ -48,6 +48,9 @@ mod raster;
 mod ray;
 /// The README's examples print what it shows.
 mod readme;
+/// The interactive HTML report driven in headless Chromium: toggle,
+/// hover values, cluster zoom, legends.
+mod report_browser;
 /// Resource bounds: memory per triangle and per sample, the budget.
 mod resources;
 /// `--shard K/N` and `rendiff report`: suites split across machines.

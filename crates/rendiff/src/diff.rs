@@ -4,8 +4,10 @@
 use std::path::{Path, PathBuf};
 
 use crate::color::Rgb;
+use crate::compare::clusters;
 use crate::compare::maps::{self, Picture};
-use crate::compare::report::{Report, Times, scene_html};
+use crate::compare::page::{PageImage, PageInput, scene_page};
+use crate::compare::report::{Report, Times};
 use crate::compare::{self, Comparison, ImageTolerances, Tolerances};
 use crate::frame::Frame;
 use crate::image_io::{self, PngEncoding};
@@ -387,7 +389,7 @@ pub fn diff_image_data(
             f.pixels, f.max_diff
         ));
     }
-    let report = Report::new(
+    let mut report = Report::new(
         &format!("{la} vs {lb}"),
         (width, height),
         (la, lb),
@@ -398,6 +400,12 @@ pub fn diff_image_data(
         Times { a: None, b: None },
         notes,
     );
+    let over: Vec<bool> = comparison
+        .errors
+        .iter()
+        .map(|&e| f64::from(e) > tol.shading_max)
+        .collect();
+    report.clusters = clusters::of_image_mask(width, height, &over, None);
     DiffResult {
         report,
         comparison,
@@ -582,6 +590,39 @@ pub fn diff_with(
         let (counts, _) = crate::compare::explain::explain(frame, reference, &accel, &oracle, max8);
         report.explained = Some(counts);
     }
+    report.clusters = match (out_a.frame(), out_b.frame()) {
+        (Some(fa), Some(fb)) => clusters::of_frames(&job.tri, &comparison, fa, fb, tol.shading_max),
+        (fa, fb) => {
+            #[expect(
+                clippy::cast_possible_truncation,
+                clippy::cast_sign_loss,
+                reason = "an 8-bit bound"
+            )]
+            let max8 = image_tol.pov_max8.clamp(0.0, 255.0) as u8;
+            let frame = fa
+                .map(|f| (&job.tri, f, true))
+                .or(fb.map(|f| (&job.tri, f, false)));
+            if image_tol.rule == compare::ImageRule::Renderer && image_tol.fuzzy.is_none() {
+                clusters::of_images(
+                    cam.width(),
+                    cam.height(),
+                    out_a.pixels(),
+                    out_b.pixels(),
+                    max8,
+                    frame,
+                )
+            } else {
+                // The same frame (or the user's rule): the pixels over the
+                // bound beyond the images' rounding.
+                let over: Vec<bool> = comparison
+                    .errors
+                    .iter()
+                    .map(|&e| f64::from(e) > tol.shading_max)
+                    .collect();
+                clusters::of_image_mask(cam.width(), cam.height(), &over, frame)
+            }
+        }
+    };
     Ok(DiffResult {
         report,
         comparison,
@@ -599,12 +640,19 @@ fn picture(out: &Output, w: u32, h: u32) -> Picture {
     Picture::from_linear(w, h, out.pixels())
 }
 
-/// Writes a scene's pictures, `report.json` and `index.html` into `dir`.
+/// Writes a scene's pictures, `report.json` and the interactive
+/// `index.html` (`compare::page`) into `dir`; `job` is the scene both
+/// sides show.
 ///
 /// # Errors
 ///
 /// [`Error::Image`] on I/O failure.
-pub fn write_outputs(r: &DiffResult, dir: &Path, encoding: PngEncoding) -> Result<(), Error> {
+pub fn write_outputs(
+    r: &DiffResult,
+    job: Option<&Prepared>,
+    dir: &Path,
+    encoding: PngEncoding,
+) -> Result<(), Error> {
     std::fs::create_dir_all(dir).map_err(|source| {
         Error::Image(image_io::ImageIoError::Io {
             path: dir.to_path_buf(),
@@ -621,21 +669,26 @@ pub fn write_outputs(r: &DiffResult, dir: &Path, encoding: PngEncoding) -> Resul
         (format!("B: {}", r.report.b), picture(&r.b, w, h)),
         ("SHADING ERROR".into(), heat),
     ];
+    let image = |key, caption: &str, file: &str| PageImage {
+        key,
+        caption: caption.to_string(),
+        file: file.to_string(),
+    };
     let mut images = vec![
-        ("a", "a.png"),
-        ("b", "b.png"),
-        ("shading error", "heat.png"),
+        image("a", &format!("A: {}", r.report.a), "a.png"),
+        image("b", &format!("B: {}", r.report.b), "b.png"),
+        image("heat", "shading error", "heat.png"),
     ];
     if r.comparison.visibility.is_some() {
         let vis = maps::visibility_map(&r.comparison, w, h);
         image_io::write_png_rgba8(&dir.join("visibility.png"), w, h, &vis.rgba)?;
         panels.push(("VISIBILITY".into(), vis));
-        images.push(("visibility classes", "visibility.png"));
+        images.push(image("vis", "visibility classes", "visibility.png"));
     }
     let refs: Vec<(&str, &Picture)> = panels.iter().map(|(l, p)| (l.as_str(), p)).collect();
     if let Some(c) = maps::composite(&refs) {
         image_io::write_png_rgba8(&dir.join("composite.png"), c.width, c.height, &c.rgba)?;
-        images.push(("side by side", "composite.png"));
+        images.push(image("composite", "side by side", "composite.png"));
     }
     let json = serde_json::to_string_pretty(&r.report).unwrap_or_default();
     let write_text = |name: &str, text: &str| {
@@ -644,6 +697,15 @@ pub fn write_outputs(r: &DiffResult, dir: &Path, encoding: PngEncoding) -> Resul
         })
     };
     write_text("report.json", &json)?;
-    write_text("index.html", &scene_html(&r.report, &images))?;
+    let page = PageInput {
+        scene: job.map(|j| &j.tri),
+        cmp: &r.comparison,
+        a: r.a.pixels(),
+        b: r.b.pixels(),
+        frame_a: r.a.frame(),
+        frame_b: r.b.frame(),
+        images,
+    };
+    write_text("index.html", &scene_page(&r.report, &page))?;
     Ok(())
 }

@@ -531,10 +531,12 @@ fn diff(a: &DiffArgs) -> Result<Outcome> {
             } else {
                 od.path().to_path_buf()
             };
-            diff::write_outputs(&r, &target, encoding(&a.flags)).map_err(|e| match e {
-                rendiff::Error::Image(e) => rendiff::Error::Image(od.relabel(e)),
-                e => e,
-            })?;
+            diff::write_outputs(&r, Some(job), &target, encoding(&a.flags)).map_err(
+                |e| match e {
+                    rendiff::Error::Image(e) => rendiff::Error::Image(od.relabel(e)),
+                    e => e,
+                },
+            )?;
             entries.push((r.report.clone(), folders[k].clone()));
         }
         if !a.json {
@@ -593,7 +595,7 @@ fn diff_two_images(a: &DiffArgs, all_png: bool) -> Result<Outcome> {
         .transpose()?;
     let r = diff::diff_images(pa, pb, fuzzy, &budget)?;
     if let Some(od) = out_dir {
-        diff::write_outputs(&r, od.path(), encoding(&a.flags)).map_err(|e| match e {
+        diff::write_outputs(&r, None, od.path(), encoding(&a.flags)).map_err(|e| match e {
             rendiff::Error::Image(e) => rendiff::Error::Image(od.relabel(e)),
             e => e,
         })?;
@@ -986,7 +988,12 @@ fn review(a: &ReviewArgs) -> Result<Outcome> {
                     &dir,
                     &[p.golden.clone(), p.pending.clone()],
                 )?;
-                rendiff::diff::write_outputs(&r, o.path(), rendiff::image_io::PngEncoding::Srgb8)?;
+                rendiff::diff::write_outputs(
+                    &r,
+                    None,
+                    o.path(),
+                    rendiff::image_io::PngEncoding::Srgb8,
+                )?;
                 o.commit()?;
                 say(&format!(
                     "  pictures: {}\n",

@@ -7,11 +7,13 @@
 //! Where they agree, the colour difference is the shading error; samples
 //! whose shading flags say they sit on a discontinuity are shading ties.
 
+pub mod clusters;
 pub mod explain;
 pub mod flip;
 pub mod maps;
 pub mod metrics;
 pub mod oracle;
+pub mod page;
 pub mod report;
 
 use serde::Serialize;

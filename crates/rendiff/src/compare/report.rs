@@ -4,6 +4,7 @@ use std::fmt::Write as _;
 
 use serde::Serialize;
 
+use super::clusters::Clusters;
 use super::{Comparison, ImageStats, ImageTolerances, ShadingStats, Tolerances, VisibilityCounts};
 
 /// The limits a tie's local tolerance may not exceed (derived constants).
@@ -70,9 +71,15 @@ pub struct Times {
     pub b: Option<f64>,
 }
 
+/// The version of the JSON report's layout: 2 added `schema_version` and
+/// `clusters`.
+pub const SCHEMA_VERSION: u32 = 2;
+
 /// One scene's verdict, serialised as DESIGN.md §5's JSON object.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Report {
+    /// [`SCHEMA_VERSION`].
+    pub schema_version: u32,
     /// The scene file as given.
     pub scene: String,
     /// Width in pixels.
@@ -104,6 +111,9 @@ pub struct Report {
     /// For a frame against an image: why the pixels beyond the 8-bit bound differ.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub explained: Option<super::explain::Explained>,
+    /// Where the sides disagree: the failing and notable pixels in
+    /// connected clusters (`compare::clusters`).
+    pub clusters: Clusters,
 }
 
 impl Report {
@@ -122,6 +132,7 @@ impl Report {
         notes: Vec<String>,
     ) -> Report {
         Report {
+            schema_version: SCHEMA_VERSION,
             scene: scene.to_string(),
             width,
             height,
@@ -157,6 +168,7 @@ impl Report {
             verdict: if cmp.pass { "pass" } else { "fail" }.to_string(),
             notes,
             explained: None,
+            clusters: Clusters::default(),
         }
     }
 
@@ -221,6 +233,20 @@ impl Report {
                 e.ray_tree,
                 e.blinn_bump,
                 e.unexplained
+            );
+        }
+        if let Some(c) = self.clusters.list.first() {
+            let _ = writeln!(
+                o,
+                "  clusters: {} ({} listed); first: {} pixel(s) {} at x {}..={}, y {}..={}",
+                self.clusters.total,
+                self.clusters.list.len(),
+                c.pixels,
+                c.kind.name(),
+                c.bbox.x0,
+                c.bbox.x1,
+                c.bbox.y0,
+                c.bbox.y1
             );
         }
         let t = &self.tolerance;
@@ -309,57 +335,6 @@ pub fn decade(v: f64) -> String {
 
 use crate::escape::html as esc;
 
-/// The HTML page of one scene: images, maps and metrics, with relative
-/// links only (viewable from the file system, no server).
-#[must_use]
-pub(crate) fn scene_html(r: &Report, images: &[(&str, &str)]) -> String {
-    let mut o = String::new();
-    let _ = write!(
-        o,
-        "<!doctype html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>rendiff: {}</title>\n{STYLE}{LOAD_CHECK}</head><body>\n",
-        esc(&r.scene)
-    );
-    let _ = writeln!(
-        o,
-        "<h1>{} <span class=\"{}\">{}</span></h1>",
-        esc(&r.scene),
-        r.verdict,
-        r.verdict.to_uppercase()
-    );
-    let _ = writeln!(
-        o,
-        "<p>{} vs {} · {}×{} · {} samples · max_depth {}</p>",
-        esc(&r.a),
-        esc(&r.b),
-        r.width,
-        r.height,
-        r.samples,
-        r.max_depth
-    );
-    o.push_str("<div class=\"images\">\n");
-    // Small renders are shown enlarged (pixelated), so single samples show.
-    let zoom = (480 / r.width.max(1)).clamp(1, 4);
-    for (label, file) in images {
-        // The composite (four panels side by side) fits the page width.
-        let (z, class) = if file.starts_with("composite") {
-            (1, " class=\"wide\"")
-        } else {
-            (zoom, "")
-        };
-        let _ = writeln!(
-            o,
-            "<figure{class}><img src=\"{}\" alt=\"{}\" style=\"zoom:{z}\"><figcaption>{}</figcaption></figure>",
-            esc(&crate::escape::href(file)),
-            esc(label),
-            esc(label)
-        );
-    }
-    o.push_str("</div>\n<pre>");
-    o.push_str(&esc(&r.summary()));
-    o.push_str("</pre>\n<p class=\"legend\">Visibility map: <span style=\"color:#3c78ff\">edge tie</span>, <span style=\"color:#28c850\">depth tie</span>, <span style=\"color:#e650e6\">near tie</span>, <span style=\"color:#ffa000\">unjudgeable</span>, <span style=\"color:#ff1e1e\">real</span>. Heat map: black = equal, blue→cyan up to the tolerance, red→yellow above it, grey = shading tie, dark red = not compared (the two sides saw different surfaces there: see the visibility map).</p>\n</body></html>\n");
-    o
-}
-
 /// The index page of several scenes with their verdicts.
 #[must_use]
 pub fn index_html(entries: &[(Report, String)]) -> String {
@@ -367,7 +342,7 @@ pub fn index_html(entries: &[(Report, String)]) -> String {
     let pass = entries.iter().filter(|(r, _)| r.passed()).count();
     let _ = write!(
         o,
-        "<!doctype html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>rendiff report</title>\n{STYLE}{LOAD_CHECK}</head><body>\n<h1>rendiff: {pass} of {} scenes pass</h1>\n<table>\n<tr><th>scene</th><th>a / b</th><th>verdict</th><th>real</th><th>shading max</th><th>8-bit max</th><th>composite</th></tr>\n",
+        "<!doctype html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>rendiff report</title>\n{STYLE}{LOAD_CHECK}</head><body>\n<h1>rendiff: {pass} of {} scenes pass</h1>\n<table>\n<tr><th>scene</th><th>a / b</th><th>verdict</th><th>real</th><th>shading max</th><th>8-bit max</th><th>clusters</th><th>composite</th></tr>\n",
         entries.len()
     );
     for (r, dir) in entries {
@@ -376,7 +351,7 @@ pub fn index_html(entries: &[(Report, String)]) -> String {
             .map_or_else(|| "–".to_string(), |v| v.real.to_string());
         let _ = writeln!(
             o,
-            "<tr><td><a href=\"{page}\">{}</a></td><td>{} / {}</td><td class=\"{}\">{}</td><td>{real}</td><td>{:.2e}</td><td>{}</td><td><a href=\"{page}\"><img class=\"thumb\" src=\"{thumb}\" alt=\"composite of {}\"></a></td></tr>",
+            "<tr><td><a href=\"{page}\">{}</a></td><td>{} / {}</td><td class=\"{}\">{}</td><td>{real}</td><td>{:.2e}</td><td>{}</td><td>{}</td><td><a href=\"{page}\"><img class=\"thumb\" src=\"{thumb}\" alt=\"composite of {}\"></a></td></tr>",
             esc(&r.scene),
             esc(&r.a),
             esc(&r.b),
@@ -384,6 +359,7 @@ pub fn index_html(entries: &[(Report, String)]) -> String {
             r.verdict.to_uppercase(),
             r.shading.max,
             r.image.max_channel_8bit,
+            r.clusters.total,
             esc(&r.scene),
             page = esc(&crate::escape::href(&format!("{dir}/index.html"))),
             thumb = esc(&crate::escape::href(&format!("{dir}/composite.png")))
@@ -393,12 +369,10 @@ pub fn index_html(entries: &[(Report, String)]) -> String {
     o
 }
 
-/// Marks the page once loaded with how many of its images decoded
-/// (`<body data-images="5/5">`), for headless checks of the report.
-const LOAD_CHECK: &str = "<script>window.addEventListener('load',function(){var im=Array.prototype.slice.call(document.images);var ok=im.filter(function(i){return i.complete&&i.naturalWidth>0;}).length;document.body.setAttribute('data-images',ok+'/'+im.length);});</script>\n";
+use super::page::LOAD_CHECK;
 
 const STYLE: &str = "<style>body{font-family:sans-serif;background:#1e1e22;color:#ddd;margin:2em}\
 h1{font-weight:normal}.pass{color:#5c5}.fail{color:#f55}figure{display:inline-block;margin:0 1em 1em 0}\
 figcaption{font-size:90%;color:#aaa}img{image-rendering:pixelated;border:1px solid #444}\
 figure.wide{display:block;margin-right:0}figure.wide img{max-width:100%;height:auto}img.thumb{height:60px}table{border-collapse:collapse}td,th{padding:4px 10px;border-bottom:1px solid #333;text-align:left}\
-pre{background:#111;padding:1em}a{color:#8af}</style>\n";
+pre{background:#111;padding:1em;white-space:pre-wrap}a{color:#8af}</style>\n";
