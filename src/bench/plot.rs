@@ -295,7 +295,7 @@ pub fn plan_savings(savings: &[(String, Backend, f64, f64)]) -> Result<String, P
         root.fill(&WHITE).map_err(err)?;
         let root = root
             .titled(
-                "What the plan saved: (time without − time with) / time without, fastest runs",
+                "What the plan saved: (time without − time with) / time without, median runs",
                 ("sans-serif", 18),
             )
             .map_err(err)?;

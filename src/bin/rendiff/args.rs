@@ -260,7 +260,7 @@ pub struct DiffArgs {
     pub b: String,
     /// Not a diff flag: diff compares two sides, given by --a and --b (this
     /// is here to say so instead of suggesting --b).
-    #[arg(long, hide = true, value_name = "BACKEND")]
+    #[arg(long, hide = true, value_name = "BACKEND", num_args = 0..=1, default_missing_value = "")]
     pub backend: Option<String>,
     /// With --b pov: render the POV-Ray reference now instead of reading the stored one.
     #[arg(long)]

@@ -93,11 +93,18 @@ fn man(a: &ManArgs) -> Result<Outcome> {
     use clap::CommandFactory;
     let cmd = Cli::command();
     let mut page = Vec::new();
-    clap_mangen::Man::new(cmd.clone())
-        .render(&mut page)
+    let main = clap_mangen::Man::new(cmd.clone());
+    main.render_title(&mut page)
+        .and_then(|()| main.render_name_section(&mut page))
+        .and_then(|()| main.render_synopsis_section(&mut page))
+        .and_then(|()| main.render_description_section(&mut page))
+        .and_then(|()| main.render_options_section(&mut page))
         .context("could not render the manual page")?;
-    // The commands, each with its own options, after the main page.
-    for sub in cmd.get_subcommands().filter(|s| !s.is_hide_set()) {
+    // Then each command, with its own options, in this one page.
+    for sub in cmd
+        .get_subcommands()
+        .filter(|s| !s.is_hide_set() && s.get_name() != "help")
+    {
         let name = sub.get_name().to_string();
         let sub = sub.clone().bin_name(format!("rendiff {name}"));
         let mut part = Vec::new();
@@ -107,10 +114,18 @@ fn man(a: &ManArgs) -> Result<Outcome> {
             .and_then(|()| man.render_options_section(&mut part))
             .context("could not render the manual page")?;
         page.extend_from_slice(format!(".SH \"RENDIFF {}\"\n", name.to_uppercase()).as_bytes());
-        // Each part's sections become subsections of this one.
-        let text = String::from_utf8_lossy(&part).replace(".SH ", ".SS ");
+        // The part's sections become subsections of this one.
+        let text = String::from_utf8_lossy(&part)
+            .lines()
+            .map(|l| match l.strip_prefix(".SH ") {
+                Some(rest) => format!(".SS {rest}\n"),
+                None => format!("{l}\n"),
+            })
+            .collect::<String>();
         page.extend_from_slice(text.as_bytes());
     }
+    main.render_version_section(&mut page)
+        .context("could not render the manual page")?;
     match &a.output {
         Some(out) => {
             check_output_dir(out)?;
@@ -592,7 +607,14 @@ fn diff(a: &DiffArgs) -> Result<Outcome> {
     use rendiff::compare::report::index_html;
     use rendiff::diff;
     if let Some(b) = &a.backend {
-        bail!("--backend {b}: diff compares two sides: use --a and --b (e.g. --a raster --b {b})");
+        let (given, example) = if b.is_empty() {
+            (String::new(), "ray")
+        } else {
+            (format!(" {b}"), b.as_str())
+        };
+        bail!(
+            "--backend{given}: diff compares two sides: use --a and --b (e.g. --a raster --b {example})"
+        );
     }
     let ov = overrides(&a.flags)?;
     let (side_a, side_b) = diff_sides(a, &ov)?;
@@ -908,6 +930,7 @@ fn plan(a: &PlanArgs) -> Result<Outcome> {
         ..Overrides::default()
     };
     let job = Prepared::load(&a.scene, &ov)?;
+    warn_job(&job);
     say(&describe(&job))?;
     Ok(Outcome::Ok)
 }
