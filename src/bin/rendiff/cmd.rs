@@ -355,9 +355,6 @@ fn bench(a: &BenchArgs) -> Result<Outcome> {
 fn pov(a: &PovArgs) -> Result<Outcome> {
     use rendiff::pov::{Destination, ExportOptions, export, export_to};
     let geometry = Geometry::from(a.geometry);
-    if let Some(out) = &a.output {
-        require_extension(out, "pov", "rendiff pov writes POV-Ray SDL")?;
-    }
     let ov = Overrides {
         size: a.size,
         max_depth: a.max_depth,
@@ -400,6 +397,7 @@ fn pov(a: &PovArgs) -> Result<Outcome> {
             check_output_dir(out)?;
             let inputs = job.scene.input_files();
             refuse_inputs(out, &inputs)?;
+            require_extension(out, "pov", "rendiff pov writes POV-Ray SDL")?;
             let dir = out
                 .parent()
                 .filter(|p| !p.as_os_str().is_empty())
@@ -830,9 +828,6 @@ fn encoding(flags: &RenderFlags) -> PngEncoding {
 
 fn render(a: &RenderArgs) -> Result<Outcome> {
     let backend = Backend::from(a.backend);
-    if let Some(out) = &a.output {
-        require_extension(out, "png", "rendiff writes PNG")?;
-    }
     let ov = overrides(&a.flags)?;
     if ov.geometry == Some(Geometry::Analytic) && backend != Backend::Ray {
         bail!(
@@ -848,6 +843,7 @@ fn render(a: &RenderArgs) -> Result<Outcome> {
     check_output_dir(&out)?;
     let inputs = job.scene.input_files();
     refuse_inputs(&out, &inputs)?;
+    require_extension(&out, "png", "rendiff writes PNG")?;
     if let Some(dir) = &a.flags.gbuffer {
         for f in rendiff::frame::GBUFFER_FILES {
             refuse_inputs(&dir.join(f), &inputs)?;
@@ -898,7 +894,13 @@ fn render(a: &RenderArgs) -> Result<Outcome> {
 
 /// Refuses `-o` names that do not end in `.EXT` (any case): the bytes
 /// written would not be what the name says (`-o x.jpg` holding a PNG).
+/// What exists and is not a file (`/dev/null`, a FIFO, a terminal) is
+/// written into as it is: its name says nothing about a format. Checked
+/// after the output is known not to be an input, which says more.
 fn require_extension(out: &Path, ext: &str, what: &str) -> Result<()> {
+    if std::fs::metadata(out).is_ok_and(|m| !m.is_file() && !m.is_dir()) {
+        return Ok(());
+    }
     let ok = out
         .extension()
         .and_then(|e| e.to_str())
