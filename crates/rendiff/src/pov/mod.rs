@@ -810,3 +810,25 @@ fn write_texture(
     );
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn relative_paths_climb_to_the_common_folder() {
+        let r = |to: &str, from: &str| relative_to(Path::new(to), Path::new(from));
+        assert_eq!(r("/a/b/t.png", "/a/b"), PathBuf::from("t.png"));
+        assert_eq!(r("/a/b/t.png", "/a/c/d"), PathBuf::from("../../b/t.png"));
+        assert_eq!(r("/a/t.png", "/"), PathBuf::from("a/t.png"));
+        assert_eq!(r("/x/t.png", "/a"), PathBuf::from("../x/t.png"));
+    }
+
+    #[test]
+    fn shell_words_are_quoted_only_when_needed() {
+        assert_eq!(shell_word("s.pov"), "s.pov");
+        assert_eq!(shell_word("my scene.pov"), "'my scene.pov'");
+        assert_eq!(shell_word("it's.pov"), "'it'\\''s.pov'");
+        assert_eq!(shell_word(""), "''");
+    }
+}
