@@ -118,6 +118,9 @@ pub fn time_vs_error(scene: &str, rows: &[Row]) -> Result<String, PlotError> {
                 .y_desc("error: mean 8-bit difference (0 drawn at 0.001)")
                 .draw()
                 .map_err(err)?;
+            // Points first, then the labels, placed where they overlap
+            // neither another label nor a point (or left out).
+            let mut labels: Vec<(&Row, RGBColor)> = Vec::new();
             for sweep in Sweep::ALL {
                 let pts: Vec<&&Row> = mine.iter().filter(|r| r.sweep == sweep).collect();
                 if pts.is_empty() {
@@ -131,15 +134,31 @@ pub fn time_vs_error(scene: &str, rows: &[Row]) -> Result<String, PlotError> {
                     format!("{} (vs {})", sweep.name(), pts[0].reference),
                     Some(c),
                 ));
-                chart
-                    .draw_series(pts.iter().map(|r| {
-                        Text::new(
-                            r.setting.clone(),
-                            (x(r), y(r)),
-                            ("sans-serif", 10).into_font().color(&c),
+                labels.extend(pts.iter().map(|r| (**r, c)));
+            }
+            let anchors: Vec<(i32, i32)> = labels
+                .iter()
+                .map(|(r, _)| chart.backend_coord(&(x(r), y(r))))
+                .collect();
+            let sizes: Vec<(i32, i32)> = labels
+                .iter()
+                .map(|(r, _)| (label_width(&r.setting), LABEL_HEIGHT))
+                .collect();
+            let offsets = place_labels(&anchors, &sizes);
+            for ((r, c), offset) in labels.iter().zip(offsets) {
+                if let Some(d) = offset {
+                    chart
+                        .plotting_area()
+                        .draw(
+                            &(EmptyElement::at((x(r), y(r)))
+                                + Text::new(
+                                    r.setting.clone(),
+                                    d,
+                                    ("sans-serif", 10).into_font().color(c),
+                                )),
                         )
-                    }))
-                    .map_err(err)?;
+                        .map_err(err)?;
+                }
             }
             // A front per reference: points measured against different
             // references are not comparable.
@@ -198,6 +217,60 @@ pub fn time_vs_error(scene: &str, rows: &[Row]) -> Result<String, PlotError> {
     Ok(svg)
 }
 
+/// The height of a point label (10 px text) in pixels.
+const LABEL_HEIGHT: i32 = 12;
+
+/// The width of a point label in pixels: 10 px sans-serif averages under
+/// 6 px a character.
+fn label_width(text: &str) -> i32 {
+    i32::try_from(text.chars().count())
+        .unwrap_or(i32::MAX / 8)
+        .saturating_mul(6)
+        .saturating_add(2)
+}
+
+/// Where each label goes: the offset of its top-left corner from its point
+/// (right of it, left, above, below, then further out), the first that
+/// overlaps no label already placed and no point's marker; `None` (left
+/// out) where every place collides. `anchors` are the points in pixels,
+/// `sizes` the labels' widths and heights; earlier labels win.
+#[must_use]
+pub fn place_labels(anchors: &[(i32, i32)], sizes: &[(i32, i32)]) -> Vec<Option<(i32, i32)>> {
+    /// A point marker's half-size (its radius 4, and a pixel of air).
+    const MARK: i32 = 5;
+    type Rect = (i32, i32, i32, i32);
+    let overlaps = |a: &Rect, b: &Rect| {
+        a.0 < b.0 + b.2 && b.0 < a.0 + a.2 && a.1 < b.1 + b.3 && b.1 < a.1 + a.3
+    };
+    let marks: Vec<Rect> = anchors
+        .iter()
+        .map(|&(x, y)| (x - MARK, y - MARK, 2 * MARK, 2 * MARK))
+        .collect();
+    let mut placed: Vec<Rect> = Vec::new();
+    let mut out = Vec::with_capacity(anchors.len());
+    for (&(x, y), &(w, h)) in anchors.iter().zip(sizes) {
+        let candidates = [
+            (MARK + 1, -h / 2),
+            (-w - MARK - 1, -h / 2),
+            (-w / 2, -h - MARK),
+            (-w / 2, MARK + 1),
+            (MARK + 1, -h - MARK),
+            (MARK + 1, MARK + 1),
+            (-w - MARK - 1, -h - MARK),
+            (-w - MARK - 1, MARK + 1),
+        ];
+        let spot = candidates.into_iter().find(|&(dx, dy)| {
+            let r = (x + dx, y + dy, w, h);
+            !placed.iter().chain(&marks).any(|o| overlaps(&r, o))
+        });
+        if let Some((dx, dy)) = spot {
+            placed.push((x + dx, y + dy, w, h));
+        }
+        out.push(spot);
+    }
+    out
+}
+
 /// What the plan saved: per scene and backend, the share of the render
 /// time that `--no-plan` spends on top (negative: within noise).
 ///
@@ -222,7 +295,7 @@ pub fn plan_savings(savings: &[(String, Backend, f64, f64)]) -> Result<String, P
         root.fill(&WHITE).map_err(err)?;
         let root = root
             .titled(
-                "What the plan saved: (time without − time with) / time without, fastest runs",
+                "What the plan saved: (time without − time with) / time without, median runs",
                 ("sans-serif", 18),
             )
             .map_err(err)?;
@@ -401,4 +474,47 @@ pub fn scaling(rows: &[super::scaling::ScalingRow]) -> Result<String, PlotError>
         root.present().map_err(err)?;
     }
     Ok(svg)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rect(a: (i32, i32), d: (i32, i32), s: (i32, i32)) -> (i32, i32, i32, i32) {
+        (a.0 + d.0, a.1 + d.1, s.0, s.1)
+    }
+
+    #[test]
+    fn placed_labels_never_overlap_each_other_or_points() {
+        // A tight cluster (the overprinting case) and a few loners.
+        let anchors: Vec<(i32, i32)> = (0..12)
+            .map(|k| (100 + 3 * k, 100 + 2 * (k % 3)))
+            .chain([(400, 50), (420, 52), (10, 300)])
+            .collect();
+        let sizes: Vec<(i32, i32)> = anchors
+            .iter()
+            .map(|_| (label_width("map:1024"), LABEL_HEIGHT))
+            .collect();
+        let placed = place_labels(&anchors, &sizes);
+        let rects: Vec<_> = placed
+            .iter()
+            .zip(&anchors)
+            .zip(&sizes)
+            .filter_map(|((p, &a), &s)| p.map(|d| rect(a, d, s)))
+            .collect();
+        assert!(rects.len() >= 4, "{placed:?}");
+        // The loners all get a label.
+        assert!(placed[12..].iter().all(Option::is_some));
+        for (i, a) in rects.iter().enumerate() {
+            for b in &rects[i + 1..] {
+                let overlap =
+                    a.0 < b.0 + b.2 && b.0 < a.0 + a.2 && a.1 < b.1 + b.3 && b.1 < a.1 + a.3;
+                assert!(!overlap, "{a:?} overlaps {b:?}");
+            }
+            for &(x, y) in &anchors {
+                let inside = x + 4 > a.0 && x - 4 < a.0 + a.2 && y + 4 > a.1 && y - 4 < a.1 + a.3;
+                assert!(!inside, "{a:?} covers the point ({x}, {y})");
+            }
+        }
+    }
 }

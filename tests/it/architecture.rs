@@ -35,7 +35,15 @@ const CRATES: &[(&str, &[&str])] = &[
 ];
 
 /// What no crate below the command line may depend on.
-const CLI_ONLY: &[&str] = &["anyhow", "clap", "indicatif", "plotters", "signal-hook"];
+const CLI_ONLY: &[&str] = &[
+    "anyhow",
+    "clap",
+    "clap_complete",
+    "clap_mangen",
+    "indicatif",
+    "plotters",
+    "signal-hook",
+];
 
 /// The `[dependencies]` names of a manifest.
 fn dependencies(manifest: &Path) -> BTreeSet<String> {

@@ -49,6 +49,8 @@ fn help_texts() {
         &["golden", "--help"],
         &["bench", "--help"],
         &["lines", "--help"],
+        &["completions", "--help"],
+        &["man", "--help"],
     ] {
         let o = rendiff(args);
         assert!(o.status.success(), "{args:?}");
@@ -173,7 +175,31 @@ fn usage_errors_exit_with_2_and_say_what_was_expected() {
     let cases: &[(&[&str], &str)] = &[
         (
             &["render", "scenes/spheres.toml", "--backend", "gpu"],
-            "expected raster, ray or painter",
+            "[possible values: raster, ray, painter]",
+        ),
+        (
+            &["diff", "scenes/spheres.toml", "--backend", "ray"],
+            "diff compares two sides: use --a and --b",
+        ),
+        (
+            &["render", "scenes/spheres.toml", "-o", "x.jpg"],
+            "-o x.jpg: rendiff writes PNG; use a .png name",
+        ),
+        (
+            &["pov", "scenes/spheres.toml", "-o", "x.txt"],
+            "use a .pov name",
+        ),
+        (
+            &["render", "scenes/spheres.toml", "--shadows", "map"],
+            "expected \"rays\" or \"map:RES\"",
+        ),
+        (
+            &["render", "scenes/spheres.toml", "--sort", "depth"],
+            "[possible values: newell, centroid]",
+        ),
+        (
+            &["render", "scenes/spheres.toml", "--geometry", "exact"],
+            "[possible values: mesh, analytic]",
         ),
         (
             &["render", "scenes/spheres.toml", "--size", "0x10"],
@@ -195,7 +221,10 @@ fn usage_errors_exit_with_2_and_say_what_was_expected() {
             &["render", "scenes/spheres.toml", "-o", "no/such/dir/x.png"],
             "does not exist",
         ),
-        (&["diff", "scenes/spheres.toml", "--b", "nope"], "--b"),
+        (
+            &["diff", "scenes/spheres.toml", "--b", "nope"],
+            "expected a backend (raster, ray, painter), pov, or a PATH.png",
+        ),
         (
             &[
                 "render",
@@ -599,4 +628,182 @@ fn painter_renders_exact_and_smooth() {
     ]);
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("--sort"), "{}", stderr(&o));
+}
+
+/// `rendiff completions SHELL` prints a script naming every command;
+/// `rendiff man` the roff page, every command in it.
+#[test]
+fn completions_and_man_page() {
+    for shell in ["bash", "zsh", "fish", "elvish", "powershell"] {
+        let o = rendiff(&["completions", shell]);
+        assert!(o.status.success(), "{shell}: {}", stderr(&o));
+        let text = stdout(&o);
+        for cmd in ["render", "diff", "pov", "bench", "completions"] {
+            assert!(text.contains(cmd), "{shell} script lacks {cmd}");
+        }
+    }
+    let o = rendiff(&["completions", "tcsh"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("possible values"), "{}", stderr(&o));
+
+    let o = rendiff(&["man"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let page = stdout(&o);
+    assert!(
+        page.starts_with(".ie") || page.contains(".TH rendiff"),
+        "{page}"
+    );
+    for sub in [
+        "RENDIFF RENDER",
+        "RENDIFF DIFF",
+        "RENDIFF POV",
+        "RENDIFF BENCH",
+    ] {
+        assert!(page.contains(sub), "the page lacks {sub}");
+    }
+    assert!(
+        page.contains("\\-\\-absolute\\-paths"),
+        "the page lacks pov's options"
+    );
+    let dir = temp("man");
+    let file = dir.join("rendiff.1");
+    let o = rendiff(&["man", "-o", file.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(std::fs::read_to_string(&file).unwrap(), page);
+    assert!(stdout(&o).is_empty());
+}
+
+/// A scene without lights renders, with a warning on standard error.
+#[test]
+fn a_scene_without_lights_is_warned_about() {
+    let dir = temp("no_lights");
+    let scene = dir.join("dark.toml");
+    std::fs::write(
+        &scene,
+        r#"[image]
+width = 16
+height = 12
+
+[camera]
+eye = [0.0, 0.0, 5.0]
+look_at = [0.0, 0.0, 0.0]
+up = [0.0, 1.0, 0.0]
+fov_y = 45.0
+
+[materials.glow]
+pigment = [0.8, 0.1, 0.1]
+emission = 0.5
+
+[[objects]]
+kind = "sphere"
+material = "glow"
+center = [0.0, 0.0, 0.0]
+radius = 1.0
+"#,
+    )
+    .unwrap();
+    let png = dir.join("dark.png");
+    let o = rendiff(&[
+        "render",
+        scene.to_str().unwrap(),
+        "--size",
+        "16x12",
+        "-o",
+        png.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("no lights: only ambient and emission light the scene"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(png.exists());
+}
+
+/// `rendiff pov S -o elsewhere/S.pov` names textures from that folder,
+/// and its first comment line is the command that renders it there:
+/// POV-Ray run in that folder finds every file.
+#[test]
+fn pov_export_renders_where_it_is_written() {
+    for scene in ["textured", "bumps"] {
+        let dir = temp(&format!("pov_elsewhere_{scene}"));
+        let pov = dir.join(format!("{scene}.pov"));
+        let o = rendiff(&[
+            "pov",
+            &format!("scenes/{scene}.toml"),
+            "--size",
+            "32x24",
+            "-o",
+            pov.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let text = std::fs::read_to_string(&pov).unwrap();
+        let mut lines = text.lines();
+        assert_eq!(lines.next(), Some("#version 3.7;"));
+        let command = lines.next().unwrap().strip_prefix("// ").unwrap();
+        let words: Vec<&str> = command.split_whitespace().collect();
+        assert_eq!(words[0], "povray", "{command}");
+        assert!(
+            words.contains(&format!("+I{scene}.pov").as_str()),
+            "{command}"
+        );
+        assert!(
+            words.contains(&format!("+O{scene}.png").as_str()),
+            "{command}"
+        );
+        assert!(
+            text.contains("png \"../"),
+            "relative names expected:\n{text}"
+        );
+        assert!(!text.contains(root().to_str().unwrap()));
+
+        let abs = dir.join(format!("{scene}_abs.pov"));
+        let o = rendiff(&[
+            "pov",
+            &format!("scenes/{scene}.toml"),
+            "--size",
+            "32x24",
+            "--absolute-paths",
+            "-o",
+            abs.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let abs_text = std::fs::read_to_string(&abs).unwrap();
+        assert!(abs_text.contains("png \"/"), "absolute names expected");
+
+        if !povray_installed() {
+            continue;
+        }
+        for (file, words) in [(&pov, words.clone()), (&abs, vec![])] {
+            let words = if words.is_empty() {
+                let t = std::fs::read_to_string(file).unwrap();
+                let line = t
+                    .lines()
+                    .nth(1)
+                    .unwrap()
+                    .strip_prefix("// ")
+                    .unwrap()
+                    .to_string();
+                line.split_whitespace()
+                    .map(str::to_string)
+                    .collect::<Vec<_>>()
+            } else {
+                words.iter().map(|w| (*w).to_string()).collect()
+            };
+            let o = Command::new(&words[0])
+                .args(&words[1..])
+                .current_dir(&dir)
+                .output()
+                .expect("povray runs");
+            let err = stderr(&o);
+            assert!(
+                !err.contains("Cannot open file"),
+                "{}: {err}",
+                file.display()
+            );
+            assert!(o.status.success(), "{}: {err}", file.display());
+            let png = file.with_extension("png");
+            assert!(png.exists(), "{} not rendered", png.display());
+        }
+    }
 }

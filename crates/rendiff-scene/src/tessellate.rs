@@ -655,6 +655,12 @@ pub fn tessellate_within(
         bounds: Aabb::EMPTY,
         warnings: Vec::new(),
     };
+    if scene.lights.is_empty() {
+        out.warnings.push(format!(
+            "{}: no lights: only ambient and emission light the scene",
+            scene.path.display()
+        ));
+    }
     let (w, h, n) = (
         u64::from(camera.width()),
         u64::from(camera.height()),

@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use clap::{Args, Parser, Subcommand};
+use clap::{Args, Parser, Subcommand, ValueEnum};
 
 /// One scene, two renderers, one verdict.
 ///
@@ -60,6 +60,109 @@ pub enum Command {
     /// number of surfaces in front of an edge changes only where it passes
     /// behind a contour edge.
     Lines(LinesArgs),
+    /// Print a shell completion script to standard output.
+    ///
+    /// For example `rendiff completions bash > ~/.local/share/bash-completion/completions/rendiff`,
+    /// or `rendiff completions zsh > ~/.zfunc/_rendiff`.
+    Completions(CompletionsArgs),
+    /// Write the manual page (roff) to standard output or a file.
+    ///
+    /// For example `rendiff man | man -l -`, or `rendiff man -o rendiff.1`.
+    Man(ManArgs),
+}
+
+/// `rendiff completions`.
+#[derive(Debug, Args)]
+pub struct CompletionsArgs {
+    /// The shell to write the script for.
+    #[arg(value_enum)]
+    pub shell: clap_complete::Shell,
+}
+
+/// `rendiff man`.
+#[derive(Debug, Args)]
+pub struct ManArgs {
+    /// Output file (default: standard output).
+    #[arg(short = 'o', long = "output", value_name = "FILE")]
+    pub output: Option<PathBuf>,
+}
+
+/// A renderer, as the command line names it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum BackendArg {
+    /// The scanline z-buffer rasterizer.
+    Raster,
+    /// The ray tracer.
+    Ray,
+    /// The painter's algorithm (depth-sorted triangles, no z-buffer).
+    Painter,
+}
+
+impl From<BackendArg> for rendiff::Backend {
+    fn from(b: BackendArg) -> Self {
+        match b {
+            BackendArg::Raster => rendiff::Backend::Raster,
+            BackendArg::Ray => rendiff::Backend::Ray,
+            BackendArg::Painter => rendiff::Backend::Painter,
+        }
+    }
+}
+
+/// The ray tracer's geometry, as the command line names it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum GeometryArg {
+    /// The triangles every backend sees.
+    Mesh,
+    /// Exact shapes (spheres, boxes, …) where the scene has them.
+    Analytic,
+}
+
+impl From<GeometryArg> for rendiff::options::Geometry {
+    fn from(g: GeometryArg) -> Self {
+        match g {
+            GeometryArg::Mesh => rendiff::options::Geometry::Mesh,
+            GeometryArg::Analytic => rendiff::options::Geometry::Analytic,
+        }
+    }
+}
+
+/// The rasterizer's depth buffer format, as the command line names it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum DepthArg {
+    /// 32-bit float.
+    F32,
+    /// 24-bit fixed point.
+    U24,
+    /// 16-bit fixed point.
+    U16,
+}
+
+impl From<DepthArg> for rendiff::options::DepthFormat {
+    fn from(d: DepthArg) -> Self {
+        match d {
+            DepthArg::F32 => rendiff::options::DepthFormat::F32,
+            DepthArg::U24 => rendiff::options::DepthFormat::U24,
+            DepthArg::U16 => rendiff::options::DepthFormat::U16,
+        }
+    }
+}
+
+/// The painter's order, as the command line names it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum SortArg {
+    /// Newell's tests (splitting cycles).
+    Newell,
+    /// The plain depth sort by centroid.
+    Centroid,
+}
+
+impl From<SortArg> for rendiff::options::PainterSort {
+    fn from(s: SortArg) -> Self {
+        match s {
+            SortArg::Newell => rendiff::options::PainterSort::Newell,
+            SortArg::Centroid => rendiff::options::PainterSort::Centroid,
+        }
+    }
 }
 
 /// `rendiff report`.
@@ -150,18 +253,25 @@ pub struct BenchArgs {
 pub struct PovArgs {
     /// The scene file (.toml).
     pub scene: PathBuf,
-    /// Output .pov (default: standard output).
+    /// Output .pov (default: standard output, images named relative to
+    /// the scene's folder). Images are named relative to the file's
+    /// folder, and its first comment line is the command that renders it
+    /// there.
     #[arg(short = 'o', long = "output", value_name = "OUT.pov")]
     pub output: Option<PathBuf>,
     /// mesh (the triangles the backends see) or analytic (POV-Ray primitives).
-    #[arg(long, default_value = "mesh", value_name = "KIND")]
-    pub geometry: String,
+    #[arg(long, value_enum, default_value_t = GeometryArg::Mesh, value_name = "KIND")]
+    pub geometry: GeometryArg,
     /// Image size, overriding the scene's [image] (e.g. 640x480).
     #[arg(long, value_name = "WxH", value_parser = parse_size)]
     pub size: Option<(u32, u32)>,
     /// POV-Ray's max_trace_level (default: the scene's max_depth).
     #[arg(long, value_name = "N")]
     pub max_depth: Option<u32>,
+    /// Name texture and bump images by absolute paths (default: relative to
+    /// the output's folder, so the file renders where it is written).
+    #[arg(long)]
+    pub absolute_paths: bool,
 }
 
 /// `rendiff golden`.
@@ -188,13 +298,17 @@ pub struct DiffArgs {
     /// by pixel with no scene.
     #[arg(required = true)]
     pub scenes: Vec<PathBuf>,
-    /// Side a: a backend (raster, ray, painter).
-    #[arg(long = "a", default_value = "raster", value_name = "BACKEND")]
+    /// Side a: a backend, pov or PATH.png, as --b [possible values: raster, ray, painter, pov, PATH.png]
+    #[arg(long = "a", default_value = "raster", value_name = "SIDE", value_parser = parse_side)]
     pub a: String,
     /// Side b: a backend, pov (the POV-Ray reference), or PATH.png (any
-    /// argument with '.' or '/').
-    #[arg(long = "b", default_value = "ray", value_name = "BACKEND|pov|PATH.png")]
+    /// argument with '.' or '/') [possible values: raster, ray, painter, pov, PATH.png]
+    #[arg(long = "b", default_value = "ray", value_name = "SIDE", value_parser = parse_side)]
     pub b: String,
+    /// Not a diff flag: diff compares two sides, given by --a and --b (this
+    /// is here to say so instead of suggesting --b).
+    #[arg(long, hide = true, value_name = "BACKEND", num_args = 0..=1, default_missing_value = "")]
+    pub backend: Option<String>,
     /// With --b pov: render the POV-Ray reference now instead of reading the stored one.
     #[arg(long)]
     pub render: bool,
@@ -241,22 +355,22 @@ pub struct RenderFlags {
     /// (for diff: DIR/a and DIR/b).
     #[arg(long, value_name = "DIR")]
     pub gbuffer: Option<PathBuf>,
-    /// Rasterizer depth buffer format: f32, u24 or u16.
-    #[arg(long, value_name = "FORMAT")]
-    pub depth: Option<String>,
-    /// Rasterizer shadows: rays, or map:RES for a shadow map.
-    #[arg(long, value_name = "MODE")]
-    pub shadows: Option<String>,
-    /// Ray tracer geometry: mesh (the shared triangles) or analytic.
-    #[arg(long, value_name = "KIND")]
-    pub geometry: Option<String>,
+    /// Rasterizer depth buffer format.
+    #[arg(long, value_enum, value_name = "FORMAT")]
+    pub depth: Option<DepthArg>,
+    /// Rasterizer shadows: rays (traced), or map:RES for a shadow map of
+    /// RES x RES texels, 64 … 16384 [possible values: rays, map:RES]
+    #[arg(long, value_name = "MODE", value_parser = parse_shadows)]
+    pub shadows: Option<rendiff::options::ShadowMode>,
+    /// Ray tracer geometry.
+    #[arg(long, value_enum, value_name = "KIND")]
+    pub geometry: Option<GeometryArg>,
     /// Ray tree depth (POV-Ray's max_trace_level), 1 … 64.
     #[arg(long, value_name = "N")]
     pub max_depth: Option<u32>,
-    /// The painter's order: newell (Newell's tests, the default) or
-    /// centroid (the plain depth sort).
-    #[arg(long, value_name = "ORDER")]
-    pub sort: Option<String>,
+    /// The painter's order (default: newell).
+    #[arg(long, value_enum, value_name = "ORDER")]
+    pub sort: Option<SortArg>,
     /// Switch the render plan off: do all work, needed or not.
     #[arg(long)]
     pub no_plan: bool,
@@ -271,9 +385,9 @@ pub struct RenderFlags {
 pub struct RenderArgs {
     /// The scene file (.toml).
     pub scene: PathBuf,
-    /// The renderer: raster, ray or painter.
-    #[arg(long, default_value = "ray")]
-    pub backend: String,
+    /// The renderer.
+    #[arg(long, value_enum, default_value_t = BackendArg::Ray, value_name = "BACKEND")]
+    pub backend: BackendArg,
     /// With --backend painter: paint the triangles with anti-aliased fills
     /// in one flat colour each (tiny-skia) instead of the sample grid.
     #[arg(long)]
@@ -337,4 +451,16 @@ fn parse_shard(s: &str) -> Result<(u64, u64), String> {
         return Err(bad());
     }
     Ok((k, n))
+}
+
+/// `--a`/`--b`: a side `diff` understands (checked here, so a bad one is
+/// a usage error naming the flag).
+fn parse_side(s: &str) -> Result<String, String> {
+    rendiff::diff::Side::parse(s).map(|_| s.to_string())
+}
+
+/// `--shadows rays|map:RES`.
+fn parse_shadows(s: &str) -> Result<rendiff::options::ShadowMode, String> {
+    s.parse::<rendiff::options::ShadowMode>()
+        .map_err(|e| e.to_string())
 }

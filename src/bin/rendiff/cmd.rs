@@ -5,14 +5,14 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use rendiff::image_io::PngEncoding;
-use rendiff::options::{DepthFormat, Geometry, ShadowMode};
+use rendiff::options::Geometry;
 use rendiff::shade::{LightKind, Pigment};
 use rendiff::{Backend, Overrides, Prepared};
 
 use crate::Outcome;
 use crate::args::{
-    BenchArgs, Cli, Command, DiffArgs, GoldenArgs, LinesArgs, PlanArgs, PovArgs, RenderArgs,
-    RenderFlags, ReportArgs, ReviewArgs,
+    BenchArgs, Cli, Command, CompletionsArgs, DiffArgs, GoldenArgs, LinesArgs, ManArgs, PlanArgs,
+    PovArgs, RenderArgs, RenderFlags, ReportArgs, ReviewArgs,
 };
 
 /// Set once standard output is a closed pipe: later output is dropped.
@@ -74,6 +74,75 @@ pub fn run(cli: Cli) -> Result<Outcome> {
         Command::Lines(a) => lines(&a),
         Command::Review(a) => review(&a),
         Command::Report(a) => report(&a),
+        Command::Completions(a) => completions(&a),
+        Command::Man(a) => man(&a),
+    }
+}
+
+/// `rendiff completions SHELL`: the script on standard output.
+fn completions(a: &CompletionsArgs) -> Result<Outcome> {
+    use clap::CommandFactory;
+    let mut cmd = Cli::command();
+    let mut script = Vec::new();
+    clap_complete::generate(a.shell, &mut cmd, "rendiff", &mut script);
+    emit(&script)?;
+    Ok(Outcome::Ok)
+}
+
+/// `rendiff man [-o FILE]`: the roff manual page, every command's
+/// options in it.
+fn man(a: &ManArgs) -> Result<Outcome> {
+    use clap::CommandFactory;
+    let cmd = Cli::command();
+    let mut page = Vec::new();
+    let main = clap_mangen::Man::new(cmd.clone());
+    main.render_title(&mut page)
+        .and_then(|()| main.render_name_section(&mut page))
+        .and_then(|()| main.render_synopsis_section(&mut page))
+        .and_then(|()| main.render_description_section(&mut page))
+        .and_then(|()| main.render_options_section(&mut page))
+        .context("could not render the manual page")?;
+    // Then each command, with its own options, in this one page.
+    for sub in cmd
+        .get_subcommands()
+        .filter(|s| !s.is_hide_set() && s.get_name() != "help")
+    {
+        let name = sub.get_name().to_string();
+        let sub = sub.clone().bin_name(format!("rendiff {name}"));
+        let mut part = Vec::new();
+        let man = clap_mangen::Man::new(sub);
+        man.render_synopsis_section(&mut part)
+            .and_then(|()| man.render_description_section(&mut part))
+            .and_then(|()| man.render_options_section(&mut part))
+            .context("could not render the manual page")?;
+        page.extend_from_slice(format!(".SH \"RENDIFF {}\"\n", name.to_uppercase()).as_bytes());
+        // The part's sections become subsections of this one.
+        let text = String::from_utf8_lossy(&part)
+            .lines()
+            .map(|l| match l.strip_prefix(".SH ") {
+                Some(rest) => format!(".SS {rest}\n"),
+                None => format!("{l}\n"),
+            })
+            .collect::<String>();
+        page.extend_from_slice(text.as_bytes());
+    }
+    main.render_version_section(&mut page)
+        .context("could not render the manual page")?;
+    match &a.output {
+        Some(out) => {
+            check_output_dir(out)?;
+            rendiff::image_io::write_atomic(out, |f| std::io::Write::write_all(f, &page))?;
+        }
+        None => emit(&page)?,
+    }
+    Ok(Outcome::Ok)
+}
+
+/// The scene's warnings (a capped segment count, no lights, …) on
+/// standard error.
+fn warn_job(job: &Prepared) {
+    for w in &job.tri.warnings {
+        warn(w);
     }
 }
 
@@ -103,6 +172,7 @@ fn lines(a: &LinesArgs) -> Result<Outcome> {
             ..Overrides::default()
         },
     )?;
+    warn_job(&job);
     check_output_dir(&a.output)?;
     refuse_inputs(&a.output, &job.scene.input_files())?;
     let start = std::time::Instant::now();
@@ -156,12 +226,9 @@ fn bench_scaling(a: &BenchArgs) -> Result<Outcome> {
     Prepared::load(&opts.scene, &Overrides::default())?;
     std::fs::create_dir_all(&a.out)
         .with_context(|| format!("could not create {}", a.out.display()))?;
-    let progress = progress_bar(opts.segments.len() + opts.sizes.len());
-    let rows = scaling::run(&opts, &|label| {
-        progress.set_message(label.to_string());
-        progress.inc(1);
-    })?;
-    progress.finish_and_clear();
+    let progress = Progress::new(opts.segments.len() + opts.sizes.len());
+    let rows = scaling::run(&opts, &|label| progress.done(label))?;
+    progress.finish();
     scaling::write_csv(&rows, &a.out.join("scaling.csv"))?;
     let svg = plot::scaling(&rows)?;
     rendiff::image_io::write_atomic(&a.out.join("scaling.svg"), |f| {
@@ -214,12 +281,9 @@ fn bench(a: &BenchArgs) -> Result<Outcome> {
     let run = Bench::new(&scenes, opts)?;
     std::fs::create_dir_all(&a.out)
         .with_context(|| format!("could not create {}", a.out.display()))?;
-    let progress = progress_bar(run.len());
-    let rows = run.run(&|label| {
-        progress.set_message(label.to_string());
-        progress.inc(1);
-    })?;
-    progress.finish_and_clear();
+    let progress = Progress::new(run.len());
+    let rows = run.run(&|label| progress.done(label))?;
+    progress.finish();
 
     bench::write_csv(&rows, &a.out.join("results.csv"))?;
     let mut names: Vec<String> = rows.iter().map(|r| r.scene.clone()).collect();
@@ -272,7 +336,7 @@ fn bench(a: &BenchArgs) -> Result<Outcome> {
     for (scene, backend, on, off) in &savings {
         let _ = writeln!(
             text,
-            "{scene:16} {backend:6} plan saved {:5.1} % (fastest run {off:.2} ms -> {on:.2} ms)",
+            "{scene:16} {backend:6} plan saved {:5.1} % (median {off:.2} ms -> {on:.2} ms)",
             if *off > 0.0 {
                 (off - on) / off * 100.0
             } else {
@@ -291,31 +355,51 @@ fn bench(a: &BenchArgs) -> Result<Outcome> {
 }
 
 fn pov(a: &PovArgs) -> Result<Outcome> {
-    use rendiff::pov::{ExportOptions, export};
-    let geometry: Geometry = a
-        .geometry
-        .parse()
-        .map_err(|e| anyhow::anyhow!("--geometry: {e}"))?;
+    use rendiff::pov::{Destination, ExportOptions, export, export_to};
+    let geometry = Geometry::from(a.geometry);
     let ov = Overrides {
         size: a.size,
         max_depth: a.max_depth,
         ..Overrides::default()
     };
     let job = Prepared::load(&a.scene, &ov)?;
-    let e = export(
-        &job.scene,
-        &job.tri,
-        &ExportOptions {
-            geometry,
-            max_depth: job.settings.max_depth,
-            abridged: false,
-        },
-    )?;
+    warn_job(&job);
+    let opts = ExportOptions {
+        geometry,
+        max_depth: job.settings.max_depth,
+        abridged: false,
+    };
+    let e = match &a.output {
+        // Written to a file: its names resolve from the file's folder.
+        Some(out) => {
+            check_output_dir(out)?;
+            export_to(
+                &job.scene,
+                &job.tri,
+                &opts,
+                Destination {
+                    pov: out,
+                    absolute_paths: a.absolute_paths,
+                },
+            )?
+        }
+        None if a.absolute_paths => export_to(
+            &job.scene,
+            &job.tri,
+            &opts,
+            Destination {
+                pov: Path::new("scene.pov"),
+                absolute_paths: true,
+            },
+        )?,
+        None => export(&job.scene, &job.tri, &opts)?,
+    };
     match &a.output {
         Some(out) => {
             check_output_dir(out)?;
             let inputs = job.scene.input_files();
             refuse_inputs(out, &inputs)?;
+            require_extension(out, "pov", "rendiff pov writes POV-Ray SDL")?;
             let dir = out
                 .parent()
                 .filter(|p| !p.as_os_str().is_empty())
@@ -444,6 +528,68 @@ fn note(bar: &indicatif::ProgressBar, line: String) -> Result<()> {
     }
 }
 
+/// Progress of a long run of items (`bench`) on standard error: a bar
+/// with the time left on a terminal; one line per finished item
+/// otherwise, so a piped or logged run is seen to move.
+struct Progress {
+    bar: indicatif::ProgressBar,
+    plain: Option<std::sync::Mutex<(usize, std::time::Instant)>>,
+    len: usize,
+}
+
+impl Progress {
+    fn new(len: usize) -> Self {
+        use std::io::IsTerminal;
+        if std::io::stderr().is_terminal() {
+            let bar = indicatif::ProgressBar::new(u64::try_from(len).unwrap_or(u64::MAX));
+            if let Ok(style) = indicatif::ProgressStyle::with_template(
+                "{bar:30} {pos}/{len} {elapsed_precise} elapsed, ETA {eta_precise}  {msg}",
+            ) {
+                bar.set_style(style);
+            }
+            Progress {
+                bar,
+                plain: None,
+                len,
+            }
+        } else {
+            Progress {
+                bar: indicatif::ProgressBar::hidden(),
+                plain: Some(std::sync::Mutex::new((0, std::time::Instant::now()))),
+                len,
+            }
+        }
+    }
+
+    /// One item finished.
+    fn done(&self, label: &str) {
+        use std::io::Write;
+        match &self.plain {
+            None => {
+                self.bar
+                    .set_message(rendiff::escape::message(label).into_owned());
+                self.bar.inc(1);
+            }
+            Some(m) => {
+                let mut g = m.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+                g.0 += 1;
+                let _ = writeln!(
+                    std::io::stderr(),
+                    "[{}/{}] {:.1} s {}",
+                    g.0,
+                    self.len,
+                    g.1.elapsed().as_secs_f64(),
+                    rendiff::escape::message(label)
+                );
+            }
+        }
+    }
+
+    fn finish(&self) {
+        self.bar.finish_and_clear();
+    }
+}
+
 /// A progress bar on a terminal, nothing otherwise.
 fn progress_bar(len: usize) -> indicatif::ProgressBar {
     use std::io::IsTerminal;
@@ -460,6 +606,16 @@ fn progress_bar(len: usize) -> indicatif::ProgressBar {
 fn diff(a: &DiffArgs) -> Result<Outcome> {
     use rendiff::compare::report::index_html;
     use rendiff::diff;
+    if let Some(b) = &a.backend {
+        let (given, example) = if b.is_empty() {
+            (String::new(), "ray")
+        } else {
+            (format!(" {b}"), b.as_str())
+        };
+        bail!(
+            "--backend{given}: diff compares two sides: use --a and --b (e.g. --a raster --b {example})"
+        );
+    }
     let is_png = |p: &PathBuf| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("png"));
     if a.scenes.iter().any(is_png) {
         return diff_two_images(a, a.scenes.iter().all(is_png));
@@ -481,6 +637,9 @@ fn diff(a: &DiffArgs) -> Result<Outcome> {
         .iter()
         .map(|p| Ok((p.display().to_string(), Prepared::load(p, &ov)?)))
         .collect::<Result<_>>()?;
+    for (_, job) in &jobs {
+        warn_job(job);
+    }
     let inputs = diff_inputs(&jobs, [&side_a, &side_b]);
     let several = jobs.len() > 1;
     let folders = rendiff::output::scene_folders(&scenes);
@@ -686,30 +845,10 @@ fn with_threads<T: Send>(
 
 /// The overrides given by the render flags.
 pub fn overrides(flags: &RenderFlags) -> Result<Overrides> {
-    let depth = flags
-        .depth
-        .as_deref()
-        .map(str::parse::<DepthFormat>)
-        .transpose()
-        .map_err(|e| anyhow::anyhow!("--depth: {e}"))?;
-    let shadows = flags
-        .shadows
-        .as_deref()
-        .map(str::parse::<ShadowMode>)
-        .transpose()
-        .map_err(|e| anyhow::anyhow!("--shadows: {e}"))?;
-    let geometry = flags
-        .geometry
-        .as_deref()
-        .map(str::parse::<Geometry>)
-        .transpose()
-        .map_err(|e| anyhow::anyhow!("--geometry: {e}"))?;
-    let painter_sort = flags
-        .sort
-        .as_deref()
-        .map(str::parse::<rendiff::options::PainterSort>)
-        .transpose()
-        .map_err(|e| anyhow::anyhow!("--sort: {e}"))?;
+    let depth = flags.depth.map(Into::into);
+    let shadows = flags.shadows;
+    let geometry = flags.geometry.map(Into::into);
+    let painter_sort = flags.sort.map(Into::into);
     let memory_budget = memory_budget(flags.memory_budget)?;
     Ok(Overrides {
         size: flags.size,
@@ -751,10 +890,7 @@ fn encoding(flags: &RenderFlags) -> PngEncoding {
 }
 
 fn render(a: &RenderArgs) -> Result<Outcome> {
-    let backend: Backend = a
-        .backend
-        .parse()
-        .map_err(|e: rendiff::options::ParseOptionError| anyhow::anyhow!("--backend: {e}"))?;
+    let backend = Backend::from(a.backend);
     let ov = overrides(&a.flags)?;
     if ov.geometry == Some(Geometry::Analytic) && backend != Backend::Ray {
         bail!(
@@ -762,9 +898,7 @@ fn render(a: &RenderArgs) -> Result<Outcome> {
         );
     }
     let job = Prepared::load(&a.scene, &ov)?;
-    for w in &job.tri.warnings {
-        warn(w);
-    }
+    warn_job(&job);
     let out = a
         .output
         .clone()
@@ -772,6 +906,7 @@ fn render(a: &RenderArgs) -> Result<Outcome> {
     check_output_dir(&out)?;
     let inputs = job.scene.input_files();
     refuse_inputs(&out, &inputs)?;
+    require_extension(&out, "png", "rendiff writes PNG")?;
     if let Some(dir) = &a.flags.gbuffer {
         for f in rendiff::frame::GBUFFER_FILES {
             refuse_inputs(&dir.join(f), &inputs)?;
@@ -820,6 +955,25 @@ fn render(a: &RenderArgs) -> Result<Outcome> {
     Ok(Outcome::Ok)
 }
 
+/// Refuses `-o` names that do not end in `.EXT` (any case): the bytes
+/// written would not be what the name says (`-o x.jpg` holding a PNG).
+/// What exists and is not a file (`/dev/null`, a FIFO, a terminal) is
+/// written into as it is: its name says nothing about a format. Checked
+/// after the output is known not to be an input, which says more.
+fn require_extension(out: &Path, ext: &str, what: &str) -> Result<()> {
+    if std::fs::metadata(out).is_ok_and(|m| !m.is_file() && !m.is_dir()) {
+        return Ok(());
+    }
+    let ok = out
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case(ext));
+    if !ok {
+        bail!("-o {}: {what}; use a .{ext} name", out.display());
+    }
+    Ok(())
+}
+
 /// An output's folder must exist before a long render starts.
 fn check_output_dir(out: &Path) -> Result<()> {
     if let Some(dir) = out.parent().filter(|p| !p.as_os_str().is_empty())
@@ -841,6 +995,7 @@ fn plan(a: &PlanArgs) -> Result<Outcome> {
         ..Overrides::default()
     };
     let job = Prepared::load(&a.scene, &ov)?;
+    warn_job(&job);
     say(&describe(&job))?;
     Ok(Outcome::Ok)
 }

@@ -47,7 +47,8 @@ pub enum LoadError {
     Key {
         /// The scene file.
         path: PathBuf,
-        /// Where (the value, or the table a missing key belongs to).
+        /// Where (the value; for a missing key, the near-miss key that is
+        /// likely its typo, else the table it belongs to).
         loc: Loc,
         /// The dotted key, e.g. `materials.red.phong` or `objects[2].radius`.
         key: String,

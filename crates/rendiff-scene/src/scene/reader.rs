@@ -36,6 +36,48 @@ impl Source<'_> {
     }
 }
 
+/// The known name closest to `name` by [`edit_distance`], if one is close
+/// enough to be a typo of it: within 2 edits, and fewer edits than half the
+/// longer name (so `ior` is not offered for `fov`). Ties go to the first
+/// in `known`'s order.
+pub(crate) fn suggestion<'k>(name: &str, known: &[&'k str]) -> Option<&'k str> {
+    known
+        .iter()
+        .map(|k| (edit_distance(name, k), *k))
+        .filter(|&(d, k)| {
+            let longer = name.chars().count().max(k.chars().count());
+            d <= 2 && 2 * d < longer
+        })
+        .min_by_key(|&(d, _)| d)
+        .map(|(_, k)| k)
+}
+
+/// The optimal-string-alignment distance (Damerau–Levenshtein with each
+/// substring edited once) between `a` and `b`, in characters: insertions,
+/// deletions, substitutions and swaps of two neighbours count one each.
+pub(crate) fn edit_distance(a: &str, b: &str) -> usize {
+    let a: Vec<char> = a.chars().collect();
+    let b: Vec<char> = b.chars().collect();
+    // Three rows of the dynamic programme: two back, one back, this one.
+    let mut two: Vec<usize> = vec![0; b.len() + 1];
+    let mut one: Vec<usize> = (0..=b.len()).collect();
+    let mut row: Vec<usize> = vec![0; b.len() + 1];
+    for i in 1..=a.len() {
+        row[0] = i;
+        for j in 1..=b.len() {
+            let cost = usize::from(a[i - 1] != b[j - 1]);
+            let mut d = (one[j] + 1).min(row[j - 1] + 1).min(one[j - 1] + cost);
+            if i > 1 && j > 1 && a[i - 1] == b[j - 2] && a[i - 2] == b[j - 1] {
+                d = d.min(two[j - 2] + 1);
+            }
+            row[j] = d;
+        }
+        std::mem::swap(&mut two, &mut one);
+        std::mem::swap(&mut one, &mut row);
+    }
+    one[b.len()]
+}
+
 fn floor_char_boundary(s: &str, mut i: usize) -> usize {
     while i > 0 && !s.is_char_boundary(i) {
         i -= 1;
@@ -132,10 +174,50 @@ impl<'s, 'i> Table<'s, 'i> {
         self.raw(key).map(Spanned::span)
     }
 
+    /// A required key is absent. A key of this table that was never asked
+    /// for and is close enough to be a typo of it ([`suggestion`]:
+    /// `postion` for `position`, not `max` for `min`) is named, at its own
+    /// place.
     pub fn missing(&self, key: &str) -> LoadError {
+        let typo = {
+            let asked = self.asked.borrow();
+            let others: Vec<&str> = self
+                .table
+                .iter()
+                .map(|(k, _)| -> &str { k.get_ref().as_ref() })
+                .filter(|name| *name != key && !asked.contains(name))
+                .collect();
+            suggestion(key, &others).and_then(|name| {
+                self.table
+                    .iter()
+                    .map(|(k, _)| k)
+                    .find(|k| -> bool { k.get_ref().as_ref() == name })
+            })
+        };
         if self.name.is_empty() {
             // Every top-level key is a table.
+            if let Some(k) = typo {
+                return self.err(
+                    &k.span(),
+                    key,
+                    format!(
+                        "missing required table [{key}] (found [{}]: a typo?)",
+                        k.get_ref()
+                    ),
+                );
+            }
             return self.err_here(key, format!("missing required table [{key}]"));
+        }
+        if let Some(k) = typo {
+            return self.err(
+                &k.span(),
+                key,
+                format!(
+                    "missing required key `{key}` {} (found `{}`: a typo?)",
+                    self.display_name(),
+                    k.get_ref()
+                ),
+            );
         }
         self.err_here(
             key,
@@ -168,11 +250,14 @@ impl<'s, 'i> Table<'s, 'i> {
                     .map(|e| format!("`{e}`"))
                     .collect::<Vec<_>>()
                     .join(", ");
+                let hint = suggestion(name, &expected)
+                    .map(|s| format!(" (did you mean `{s}`?)"))
+                    .unwrap_or_default();
                 return Err(self.err(
                     &k.span(),
                     name,
                     format!(
-                        "unknown key {}; expected one of: {list}",
+                        "unknown key {}{hint}; expected one of: {list}",
                         self.display_name()
                     ),
                 ));
@@ -577,5 +662,24 @@ mod tests {
         assert_eq!(src.loc(off), Loc { line: 1, col: 3 });
         let off = src.text.rfind('=').unwrap();
         assert_eq!(src.loc(off), Loc { line: 2, col: 4 });
+    }
+
+    #[test]
+    fn edit_distance_counts_swaps_as_one() {
+        assert_eq!(edit_distance("position", "postion"), 1);
+        assert_eq!(edit_distance("phong_size", "phong_sise"), 1);
+        assert_eq!(edit_distance("radius", "raduis"), 1);
+        assert_eq!(edit_distance("", "eye"), 3);
+        assert_eq!(edit_distance("eye", "eye"), 0);
+        assert_eq!(edit_distance("kitten", "sitting"), 3);
+    }
+
+    #[test]
+    fn suggestions_are_close_and_not_short_coincidences() {
+        let known = ["phong", "phong_size", "ior", "ambient"];
+        assert_eq!(suggestion("phong_sise", &known), Some("phong_size"));
+        assert_eq!(suggestion("phongg", &known), Some("phong"));
+        assert_eq!(suggestion("fov", &known), None);
+        assert_eq!(suggestion("colour", &known), None);
     }
 }

@@ -13,12 +13,15 @@
 //! shortest round-trip form (an `f32` is widened to `f64` exactly first),
 //! the camera as explicit vectors (no `look_at`, no `angle`). Image paths
 //! are written as in the scene file, relative to the scene's folder:
-//! POV-Ray must run from there (`rendiff golden` does).
+//! POV-Ray must run from there (`rendiff golden` does). [`export_to`]
+//! writes them relative to the .pov file's own folder instead (or
+//! absolute), with the exact command that renders it on its first comment
+//! line: what `rendiff pov -o FILE` writes.
 
 pub mod golden;
 
 use std::fmt::Write as _;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use crate::camera::Projection;
 use crate::color::Rgb;
@@ -191,15 +194,67 @@ pub struct ExportError {
 ///
 /// [`ExportError`] for an image whose name POV-Ray cannot open.
 pub fn export(scene: &Scene, tri: &TriScene, opts: &ExportOptions) -> Result<Export, ExportError> {
+    export_with(scene, tri, opts, None)
+}
+
+/// Where an exported file goes, for [`export_to`].
+#[derive(Clone, Copy, Debug)]
+pub struct Destination<'a> {
+    /// The .pov file that will be written (its folder need not be the
+    /// scene's): POV-Ray runs in its folder, writing the PNG of the same
+    /// stem there.
+    pub pov: &'a Path,
+    /// Name the images by absolute paths instead of relative to the .pov
+    /// file's folder.
+    pub absolute_paths: bool,
+}
+
+/// Exports a scene to be written at `dest.pov`: as [`export`], but image
+/// names are relative to that file's folder (or absolute), and the first
+/// comment line is the exact `povray` command that renders it there (the
+/// PNG beside it, of the same stem). Greyscale RGB copies
+/// ([`ImageRef::rgb_copy`]) belong in that folder.
+///
+/// # Errors
+///
+/// [`ExportError`] for an image whose name POV-Ray cannot open.
+pub fn export_to(
+    scene: &Scene,
+    tri: &TriScene,
+    opts: &ExportOptions,
+    dest: Destination<'_>,
+) -> Result<Export, ExportError> {
+    export_with(scene, tri, opts, Some(dest))
+}
+
+fn export_with(
+    scene: &Scene,
+    tri: &TriScene,
+    opts: &ExportOptions,
+    dest: Option<Destination<'_>>,
+) -> Result<Export, ExportError> {
     let mut o = String::new();
     let cam = &tri.camera;
     let n = cam.samples();
     let render_size = (cam.width() * n, cam.height() * n);
-    write_header(&mut o, scene, tri, opts, render_size);
+    match dest {
+        None => write_header(&mut o, scene, tri, opts, render_size),
+        Some(d) => write_header_for(&mut o, scene, tri, opts, render_size, d.pov),
+    }
     write_camera(&mut o, cam);
     write_lights(&mut o, tri);
     let mut images: Vec<ImageRef> = Vec::new();
-    write_objects(&mut o, scene, tri, opts, &mut images)?;
+    let names = match dest {
+        None => ImageNames::SceneRelative,
+        Some(d) if d.absolute_paths => ImageNames::Absolute,
+        Some(d) => ImageNames::RelativeTo(absolute(
+            d.pov
+                .parent()
+                .filter(|p| !p.as_os_str().is_empty())
+                .unwrap_or(Path::new(".")),
+        )),
+    };
+    write_objects(&mut o, scene, tri, opts, &names, &mut images)?;
     Ok(Export {
         text: o,
         images,
@@ -249,6 +304,121 @@ fn write_header(
         opts.max_depth
     );
     let _ = writeln!(o, "background {{ rgb {} }}", rgb(tri.background));
+}
+
+/// As [`write_header`], for a file written at `pov`: the first comment
+/// line is the command that renders it in its folder.
+fn write_header_for(
+    o: &mut String,
+    scene: &Scene,
+    tri: &TriScene,
+    opts: &ExportOptions,
+    render_size: (u32, u32),
+    pov: &Path,
+) {
+    let n = tri.camera.samples();
+    let file = pov.file_name().map_or_else(
+        || "scene.pov".to_string(),
+        |s| s.to_string_lossy().into_owned(),
+    );
+    let png = Path::new(&file)
+        .with_extension("png")
+        .to_string_lossy()
+        .into_owned();
+    let _ = writeln!(o, "#version 3.7;");
+    let _ = writeln!(
+        o,
+        "// {}",
+        crate::escape::sdl_comment(&golden::command_line(
+            &shell_word(&file),
+            &shell_word(&png),
+            render_size
+        ))
+    );
+    let _ = writeln!(
+        o,
+        "// Exported by rendiff from {}: run the command above in this file's folder ({}x{}).",
+        crate::escape::sdl_comment(
+            &scene
+                .path
+                .file_name()
+                .map_or_else(String::new, |s| s.to_string_lossy().into_owned())
+        ),
+        render_size.0,
+        render_size.1
+    );
+    if n > 1 {
+        let _ = writeln!(
+            o,
+            "// Then average {n}x{n} blocks (the n×n samples of each pixel, each clamped to [0, 1] first, as the PNG stores them)."
+        );
+    }
+    let _ = writeln!(
+        o,
+        "global_settings {{ assumed_gamma 1.0 ambient_light rgb {} max_trace_level {} adc_bailout 0 }}",
+        rgb(tri.ambient_light),
+        opts.max_depth
+    );
+    let _ = writeln!(o, "background {{ rgb {} }}", rgb(tri.background));
+}
+
+/// A word a POSIX shell reads as it is: bare when it is made of safe
+/// characters, single-quoted otherwise.
+fn shell_word(s: &str) -> String {
+    if !s.is_empty()
+        && s.chars()
+            .all(|c| c.is_ascii_alphanumeric() || "._-+/=,:".contains(c))
+    {
+        s.to_string()
+    } else {
+        format!("'{}'", s.replace('\'', "'\\''"))
+    }
+}
+
+/// A path made absolute: resolved through links where it exists (so a
+/// relative path between two of them is right), else joined to the
+/// current folder.
+fn absolute(p: &Path) -> PathBuf {
+    std::fs::canonicalize(p)
+        .or_else(|_| std::path::absolute(p))
+        .unwrap_or_else(|_| p.to_path_buf())
+}
+
+/// `to` relative to the folder `from` (both absolute): `..` for each of
+/// `from`'s components not shared, then the rest of `to`.
+fn relative_to(to: &Path, from: &Path) -> PathBuf {
+    let (t, f): (Vec<_>, Vec<_>) = (to.components().collect(), from.components().collect());
+    let common = t.iter().zip(&f).take_while(|(a, b)| a == b).count();
+    let mut out = PathBuf::new();
+    for _ in common..f.len() {
+        out.push("..");
+    }
+    for c in &t[common..] {
+        out.push(c);
+    }
+    out
+}
+
+/// How image files are named in the SDL.
+enum ImageNames {
+    /// As the scene file wrote them (relative to the scene's folder).
+    SceneRelative,
+    /// Relative to this (absolute) folder, where the .pov will be.
+    RelativeTo(PathBuf),
+    /// Absolute.
+    Absolute,
+}
+
+impl ImageNames {
+    fn name(&self, scene: &Scene, path: &Path) -> String {
+        match self {
+            ImageNames::SceneRelative => image_name(scene, path),
+            ImageNames::RelativeTo(dir) => relative_to(&absolute(path), dir)
+                .to_string_lossy()
+                .into_owned(),
+            ImageNames::Absolute => absolute(path).to_string_lossy().into_owned(),
+        }
+    }
 }
 
 /// The camera (POVRAY.md §2, §9.6): explicit vectors, the right-handed
@@ -325,6 +495,7 @@ fn write_objects(
     scene: &Scene,
     tri: &TriScene,
     opts: &ExportOptions,
+    names: &ImageNames,
     images: &mut Vec<ImageRef>,
 ) -> Result<(), ExportError> {
     let cam = &tri.camera;
@@ -344,7 +515,7 @@ fn write_objects(
         } else {
             write_mesh2(&mut body, tri, k, opts.abridged)
         };
-        write_texture(&mut body, scene, m, uv, images)?;
+        write_texture(&mut body, scene, m, uv, names, images)?;
         if m.is_transparent() && m.ior != 1.0 {
             let _ = writeln!(body, "  interior {{ ior {} }}", f(m.ior));
         }
@@ -553,6 +724,7 @@ fn write_texture(
     scene: &Scene,
     m: &Material,
     uv: bool,
+    names: &ImageNames,
     images: &mut Vec<ImageRef>,
 ) -> Result<(), ExportError> {
     let mut note = |tex: &crate::texture::Texture, key: &'static str| {
@@ -565,7 +737,7 @@ fn write_texture(
                 .map_or_else(String::new, |s| s.to_string_lossy().into_owned());
             format!("rendiff_rgb_{stem}.png")
         } else {
-            image_name(scene, tex.path())
+            names.name(scene, tex.path())
         };
         let literal = crate::escape::sdl_file_name(&name).map_err(|message| ExportError {
             path: scene.path.clone(),
@@ -637,4 +809,26 @@ fn write_texture(
         f(m.reflection)
     );
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn relative_paths_climb_to_the_common_folder() {
+        let r = |to: &str, from: &str| relative_to(Path::new(to), Path::new(from));
+        assert_eq!(r("/a/b/t.png", "/a/b"), PathBuf::from("t.png"));
+        assert_eq!(r("/a/b/t.png", "/a/c/d"), PathBuf::from("../../b/t.png"));
+        assert_eq!(r("/a/t.png", "/"), PathBuf::from("a/t.png"));
+        assert_eq!(r("/x/t.png", "/a"), PathBuf::from("../x/t.png"));
+    }
+
+    #[test]
+    fn shell_words_are_quoted_only_when_needed() {
+        assert_eq!(shell_word("s.pov"), "s.pov");
+        assert_eq!(shell_word("my scene.pov"), "'my scene.pov'");
+        assert_eq!(shell_word("it's.pov"), "'it'\\''s.pov'");
+        assert_eq!(shell_word(""), "''");
+    }
 }
