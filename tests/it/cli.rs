@@ -223,7 +223,7 @@ fn usage_errors_exit_with_2_and_say_what_was_expected() {
         ),
         (
             &["diff", "scenes/spheres.toml", "--b", "nope"],
-            "expected a backend (raster, ray, painter), pov, or a PATH.png",
+            "expected a backend (raster, ray, painter), pov, a PATH.png, or a G-buffer folder",
         ),
         (
             &[

@@ -534,7 +534,7 @@ fn read_budgeted(path: &Path, budget: &crate::budget::Budget) -> Result<Vec<u8>,
     bytes
 }
 
-/// Reads an id image as [`crate::frame::Frame::write_gbuffer`] writes it:
+/// Reads an id image as the frame's `write_gbuffer` writes it:
 /// an RGBA8 PNG whose four bytes per pixel are a little-endian `u32`
 /// (triangle id + 1; 0 for the background). The size must be `expect`.
 ///
@@ -584,8 +584,7 @@ pub fn read_png_u32_within(
 }
 
 /// Reads a single-channel PFM (`Pf`, either byte order, rows bottom to
-/// top) as written by [`crate::frame::Frame::write_gbuffer`]'s
-/// `depth.pfm`; rows are returned top to bottom. The size must be
+/// top) as the frame's `write_gbuffer` writes `depth.pfm`; rows are returned top to bottom. The size must be
 /// `expect`.
 ///
 /// # Errors

@@ -679,6 +679,18 @@ pub fn write_outputs(
         image("b", &format!("B: {}", r.report.b), "b.png"),
         image("heat", "shading error", "heat.png"),
     ];
+    // The perceptual error map (FLIP's magma colours: black = no visible
+    // difference, white = the largest).
+    if let Ok((map, _)) = compare::flip::flip(
+        r.b.pixels(),
+        r.a.pixels(),
+        w,
+        h,
+        compare::flip::DEFAULT_PPD,
+    ) && let Some(p) = compare::flip::magma_picture(w, h, &map)
+    {
+        image_io::write_png_rgba8(&dir.join("flip.png"), w, h, &p.rgba)?;
+    }
     if r.comparison.visibility.is_some() {
         let vis = maps::visibility_map(&r.comparison, w, h);
         image_io::write_png_rgba8(&dir.join("visibility.png"), w, h, &vis.rgba)?;

@@ -12,6 +12,9 @@ pub struct ImageStats {
     pub differing_pixels: u64,
     /// Mean SSIM of the luminance (11×11 Gaussian window, σ = 1.5).
     pub ssim: f64,
+    /// LDR-FLIP (perceptual) pooled over the pixels, at the reference's
+    /// default viewing condition ([`super::flip::DEFAULT_PPD`]).
+    pub flip: super::flip::FlipStats,
 }
 
 /// Compares two images of the same size (linear colours, clamped to [0, 1]).
@@ -36,6 +39,9 @@ pub(crate) fn image_stats(w: u32, h: u32, a: &[Rgb], b: &[Rgb]) -> ImageStats {
         max_channel_8bit: max,
         differing_pixels: differing,
         ssim: ssim(w, h, a, b),
+        flip: super::flip::flip(b, a, w, h, super::flip::DEFAULT_PPD)
+            .map(|(_, s)| s)
+            .unwrap_or_default(),
     }
 }
 

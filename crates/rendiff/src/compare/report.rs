@@ -218,8 +218,12 @@ impl Report {
         o.push('\n');
         let _ = writeln!(
             o,
-            "  image: max 8-bit difference {}, {} pixels differ, SSIM {:.5}",
-            self.image.max_channel_8bit, self.image.differing_pixels, self.image.ssim
+            "  image: max 8-bit difference {}, {} pixels differ, SSIM {:.5}, FLIP mean {:.5} (max {:.3})",
+            self.image.max_channel_8bit,
+            self.image.differing_pixels,
+            self.image.ssim,
+            self.image.flip.mean,
+            self.image.flip.max
         );
         if let Some(e) = &self.explained {
             let _ = writeln!(
