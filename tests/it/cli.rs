@@ -51,6 +51,8 @@ fn help_texts() {
         &["lines", "--help"],
         &["completions", "--help"],
         &["man", "--help"],
+        &["review", "--help"],
+        &["report", "--help"],
     ] {
         let o = rendiff(args);
         assert!(o.status.success(), "{args:?}");

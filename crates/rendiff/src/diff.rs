@@ -681,13 +681,9 @@ pub fn write_outputs(
     ];
     // The perceptual error map (FLIP's magma colours: black = no visible
     // difference, white = the largest).
-    if let Ok((map, _)) = compare::flip::flip(
-        r.b.pixels(),
-        r.a.pixels(),
-        w,
-        h,
-        compare::flip::DEFAULT_PPD,
-    ) && let Some(p) = compare::flip::magma_picture(w, h, &map)
+    if let Ok((map, _)) =
+        compare::flip::flip(r.b.pixels(), r.a.pixels(), w, h, compare::flip::DEFAULT_PPD)
+        && let Some(p) = compare::flip::magma_picture(w, h, &map)
     {
         image_io::write_png_rgba8(&dir.join("flip.png"), w, h, &p.rgba)?;
     }
