@@ -498,27 +498,7 @@ pub fn diff_with(
         compare::ImageRule::SameFrame
     };
     let mut notes = Vec::new();
-    let mut max_depth = job.settings.max_depth;
-    // Sides that render (a backend, or POV-Ray's reference at either depth).
-    let renderers = [a, b]
-        .iter()
-        .filter(|s| matches!(s, Side::Backend(_) | Side::Pov { .. }))
-        .count();
-    if renderers == 2
-        && !(a.traces_ray_tree() && b.traces_ray_tree())
-        && max_depth > 1
-        && job.plan.ray_tree
-    {
-        let who = if a.traces_ray_tree() {
-            b.label()
-        } else {
-            a.label()
-        };
-        notes.push(format!(
-            "max_depth forced from {max_depth} to 1 on both sides: {who} shades locally and cannot trace the ray tree"
-        ));
-        max_depth = 1;
-    }
+    let max_depth = common_max_depth(job, a, b, &mut notes);
     let (out_a, note_a) = produce(job, a, max_depth)?;
     let (out_b, note_b) = produce(job, b, max_depth)?;
     notes.extend(note_a);
@@ -572,26 +552,83 @@ pub fn diff_with(
         },
         notes,
     );
-    // A frame against an image: explain the pixels beyond the bound.
-    if let (Some(frame), None) | (None, Some(frame)) = (out_a.frame(), out_b.frame()) {
-        let reference = if out_a.frame().is_some() {
-            out_b.pixels()
+    report.explained = explain_against_image(job, &out_a, &out_b, &image_tol);
+    report.clusters = clusters_for(job, &comparison, (&out_a, &out_b), (&tol, &image_tol));
+    Ok(DiffResult {
+        report,
+        comparison,
+        a: out_a,
+        b: out_b,
+        tolerance: tol,
+    })
+}
+
+/// The ray-tree depth both sides use: the scene's, or 1 when one side
+/// renders and shades locally (with a note saying so).
+fn common_max_depth(job: &Prepared, a: &Side, b: &Side, notes: &mut Vec<String>) -> u32 {
+    let mut max_depth = job.settings.max_depth;
+    // Sides that render (a backend, or POV-Ray's reference at either depth).
+    let renderers = [a, b]
+        .iter()
+        .filter(|s| matches!(s, Side::Backend(_) | Side::Pov { .. }))
+        .count();
+    if renderers == 2
+        && !(a.traces_ray_tree() && b.traces_ray_tree())
+        && max_depth > 1
+        && job.plan.ray_tree
+    {
+        let who = if a.traces_ray_tree() {
+            b.label()
         } else {
-            out_a.pixels()
+            a.label()
         };
-        let accel = crate::accel::Accel::new(&job.tri, crate::accel::AccelOptions::default());
-        let oracle = crate::compare::Oracle::new(&job.tri, job.settings.depth);
-        #[expect(
-            clippy::cast_possible_truncation,
-            clippy::cast_sign_loss,
-            reason = "an 8-bit bound"
-        )]
-        let max8 = image_tol.pov_max8.clamp(0.0, 255.0) as u8;
-        let (counts, _) = crate::compare::explain::explain(frame, reference, &accel, &oracle, max8);
-        report.explained = Some(counts);
+        notes.push(format!(
+            "max_depth forced from {max_depth} to 1 on both sides: {who} shades locally and cannot trace the ray tree"
+        ));
+        max_depth = 1;
     }
-    report.clusters = match (out_a.frame(), out_b.frame()) {
-        (Some(fa), Some(fb)) => clusters::of_frames(&job.tri, &comparison, fa, fb, tol.shading_max),
+    max_depth
+}
+
+/// A frame against an image: why the pixels beyond the 8-bit bound
+/// differ, from the frame's side.
+fn explain_against_image(
+    job: &Prepared,
+    out_a: &Output,
+    out_b: &Output,
+    image_tol: &ImageTolerances,
+) -> Option<compare::explain::Explained> {
+    let ((Some(frame), None) | (None, Some(frame))) = (out_a.frame(), out_b.frame()) else {
+        return None;
+    };
+    let reference = if out_a.frame().is_some() {
+        out_b.pixels()
+    } else {
+        out_a.pixels()
+    };
+    let accel = crate::accel::Accel::new(&job.tri, crate::accel::AccelOptions::default());
+    let oracle = crate::compare::Oracle::new(&job.tri, job.settings.depth);
+    #[expect(
+        clippy::cast_possible_truncation,
+        clippy::cast_sign_loss,
+        reason = "an 8-bit bound"
+    )]
+    let max8 = image_tol.pov_max8.clamp(0.0, 255.0) as u8;
+    let (counts, _) = crate::compare::explain::explain(frame, reference, &accel, &oracle, max8);
+    Some(counts)
+}
+
+/// Where the two sides differ, as clusters: between two frames by class;
+/// against an image the pixels over its rule's bound.
+fn clusters_for(
+    job: &Prepared,
+    comparison: &Comparison,
+    (out_a, out_b): (&Output, &Output),
+    (tol, image_tol): (&Tolerances, &ImageTolerances),
+) -> clusters::Clusters {
+    let cam = &job.tri.camera;
+    match (out_a.frame(), out_b.frame()) {
+        (Some(fa), Some(fb)) => clusters::of_frames(&job.tri, comparison, fa, fb, tol.shading_max),
         (fa, fb) => {
             #[expect(
                 clippy::cast_possible_truncation,
@@ -622,20 +659,9 @@ pub fn diff_with(
                 clusters::of_image_mask(cam.width(), cam.height(), &over, frame)
             }
         }
-    };
-    Ok(DiffResult {
-        report,
-        comparison,
-        a: out_a,
-        b: out_b,
-        tolerance: tol,
-    })
+    }
 }
 
-/// Half a code of a stored image's encoding, in linear units (the largest
-/// over its range): a difference below it is the image's own rounding.
-/// 16-bit linear: 0.5/65535; 8-bit sRGB: half the widest step, at the top
-/// of the range (254 → 255). Frames are f32: 0.
 fn picture(out: &Output, w: u32, h: u32) -> Picture {
     Picture::from_linear(w, h, out.pixels())
 }

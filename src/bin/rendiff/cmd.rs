@@ -443,6 +443,7 @@ fn golden(a: &GoldenArgs) -> Result<Outcome> {
         .iter()
         .map(|p| Prepared::load(p, &Overrides::default()))
         .collect::<Result<_, _>>()?;
+    refuse_shared_reference_names(jobs.iter())?;
     let version = golden::povray_version()?;
     let progress = progress_bar(jobs.len());
     let mut outcome = Outcome::Ok;
@@ -639,6 +640,12 @@ fn diff(a: &DiffArgs) -> Result<Outcome> {
         .collect::<Result<_>>()?;
     for (_, job) in &jobs {
         warn_job(job);
+    }
+    if [&side_a, &side_b]
+        .iter()
+        .any(|s| matches!(s, diff::Side::Pov { .. }))
+    {
+        refuse_shared_reference_names(jobs.iter().map(|(_, j)| j))?;
     }
     let inputs = diff_inputs(&jobs, [&side_a, &side_b]);
     let several = jobs.len() > 1;
@@ -1215,6 +1222,25 @@ fn shard(scenes: Vec<PathBuf>, shard: Option<(u64, u64)>) -> Vec<PathBuf> {
             fnv1a(key.trim_start_matches("./")) % n == k - 1
         })
         .collect()
+}
+
+/// POV-Ray references are named by the scene's file name in one golden
+/// folder (DESIGN.md §5): two scenes of one name (`a/x.toml`, `b/x.toml`)
+/// would read and overwrite each other's references, so a request that
+/// names both is refused, naming both.
+fn refuse_shared_reference_names<'a>(jobs: impl Iterator<Item = &'a Prepared>) -> Result<()> {
+    let mut seen: std::collections::HashMap<String, &Path> = std::collections::HashMap::new();
+    for job in jobs {
+        let name = job.scene.name();
+        if let Some(first) = seen.insert(name.clone(), &job.scene.path) {
+            bail!(
+                "{} and {}: both would use the POV-Ray references named {name} in one golden folder; give one its own --golden DIR (or rename it)",
+                first.display(),
+                job.scene.path.display()
+            );
+        }
+    }
+    Ok(())
 }
 
 /// `rendiff report`: verdicts of several runs as one.
