@@ -67,7 +67,7 @@ fn two_scenes_of_one_name_cannot_share_a_golden_folder() {
     let scene = "[image]\nwidth = 8\nheight = 6\n[camera]\neye = [0.0, 0.0, 5.0]\nlook_at = [0.0, 0.0, 0.0]\nup = [0.0, 1.0, 0.0]\nfov_y = 40.0\n[[lights]]\nkind = \"point\"\nposition = [2.0, 2.0, 5.0]\ncolor = [1.0, 1.0, 1.0]\n[materials.m]\npigment = [0.5, 0.5, 0.5]\n[[objects]]\nkind = \"sphere\"\nmaterial = \"m\"\ncenter = [0.0, 0.0, 0.0]\nradius = 1.0\n";
     for sub in ["a", "b"] {
         std::fs::create_dir_all(d.join(sub)).unwrap();
-        std::fs::write(d.join(sub).join("x.toml"), &scene).unwrap();
+        std::fs::write(d.join(sub).join("x.toml"), scene).unwrap();
     }
     for args in [
         &["golden", "a/x.toml", "b/x.toml", "--golden", "g"][..],
