@@ -390,7 +390,7 @@ pub fn diff_image_data(
         ));
     }
     let mut report = Report::new(
-        &format!("{la} vs {lb}"),
+        "two images",
         (width, height),
         (la, lb),
         1,
