@@ -225,3 +225,37 @@ fn the_scenes_fuzzy_table_is_read_and_checked() {
         );
     }
 }
+
+#[test]
+fn float_images_compare_exactly() {
+    // A colour PFM (PF, little-endian, rows bottom to top) and a grey one.
+    let dir = tempfile::tempdir().unwrap();
+    let write_pf = |name: &str, values: &[f32]| {
+        let mut bytes = b"PF\n4 3\n-1.0\n".to_vec();
+        for v in values {
+            bytes.extend_from_slice(&v.to_le_bytes());
+        }
+        std::fs::write(dir.path().join(name), bytes).unwrap();
+    };
+    let base: Vec<f32> = (0..36u8).map(|k| f32::from(k) / 40.0).collect();
+    write_pf("a.pfm", &base);
+    write_pf("same.pfm", &base);
+    let mut moved = base.clone();
+    moved[7] += 1e-6;
+    write_pf("moved.pfm", &moved);
+    let run = |b: &str, extra: &[&str]| {
+        let mut args = vec!["diff", "a.pfm", b, "--json"];
+        args.extend(extra);
+        let (code, json) = rendiff(&args, dir.path());
+        (code, over(&json))
+    };
+    assert_eq!(run("same.pfm", &[]), (0, 0));
+    // A float stores its value: a change of 1e-6 is a difference.
+    assert_eq!(run("moved.pfm", &[]), (1, 1));
+    assert_eq!(run("moved.pfm", &["--fuzzy", "0,1"]), (0, 1));
+    // Not a PFM: exit 2 naming the file.
+    std::fs::write(dir.path().join("bad.pfm"), b"P6\n1 1\n255\n...").unwrap();
+    let (code, text) = rendiff(&["diff", "a.pfm", "bad.pfm"], dir.path());
+    assert_eq!(code, 2, "{text}");
+    assert!(text.contains("bad.pfm"), "{text}");
+}

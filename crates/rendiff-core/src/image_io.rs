@@ -584,8 +584,8 @@ pub fn read_png_u32_within(
 }
 
 /// Reads a single-channel PFM (`Pf`, either byte order, rows bottom to
-/// top) as the frame's `write_gbuffer` writes `depth.pfm`; rows are returned top to bottom. The size must be
-/// `expect`.
+/// top) as the frame's `write_gbuffer` writes `depth.pfm`; rows are
+/// returned top to bottom. The size must be `expect`.
 ///
 /// # Errors
 ///
@@ -596,13 +596,60 @@ pub fn read_pfm_within(
     expect: (u32, u32),
     budget: &crate::budget::Budget,
 ) -> Result<Vec<f32>, ImageIoError> {
+    let (_, _, channels, values) = read_pfm(path, Some(expect), budget)?;
+    if channels != 1 {
+        return Err(ImageIoError::Png {
+            path: path.to_path_buf(),
+            message: "expected a grey PFM (\"Pf\"), got a colour one (\"PF\")".into(),
+        });
+    }
+    Ok(values)
+}
+
+/// Reads a PFM image (`PF` colour or `Pf` grey, either byte order) as
+/// linear colour, rows top to bottom; `expect` the size when given. Values
+/// are kept as stored (a float image is not rounded), non-finite ones
+/// become 0.
+///
+/// # Errors
+///
+/// As [`read_pfm_within`].
+pub fn read_pfm_linear_within(
+    path: &Path,
+    expect: Option<(u32, u32)>,
+    budget: &crate::budget::Budget,
+) -> Result<LinearImage, ImageIoError> {
+    let (width, height, channels, values) = read_pfm(path, expect, budget)?;
+    let f = |v: f32| if v.is_finite() { v } else { 0.0 };
+    let pixels = values
+        .chunks_exact(channels)
+        .map(|c| match c {
+            [g] => Rgb::new(f(*g), f(*g), f(*g)),
+            [r, g, b] => Rgb::new(f(*r), f(*g), f(*b)),
+            _ => Rgb::BLACK,
+        })
+        .collect();
+    Ok(LinearImage {
+        width,
+        height,
+        pixels,
+        linear16: false,
+    })
+}
+
+/// A PFM's size, channels (1 or 3) and values, rows top to bottom.
+fn read_pfm(
+    path: &Path,
+    expect: Option<(u32, u32)>,
+    budget: &crate::budget::Budget,
+) -> Result<(u32, u32, usize, Vec<f32>), ImageIoError> {
     let bad = |why: String| ImageIoError::Png {
         path: path.to_path_buf(),
         message: why,
     };
     let bytes = read_budgeted(path, budget)?;
-    // The header: three whitespace-separated tokens after "Pf", then one
-    // whitespace byte before the data.
+    // The header: three whitespace-separated tokens after "Pf"/"PF", then
+    // one whitespace byte before the data.
     let mut tokens = Vec::new();
     let mut i = 0;
     while tokens.len() < 4 && i < bytes.len().min(256) {
@@ -616,11 +663,15 @@ pub fn read_pfm_within(
         tokens.push(String::from_utf8_lossy(&bytes[start..i]).into_owned());
     }
     i += 1;
-    if tokens.len() < 4 || tokens[0] != "Pf" {
-        return Err(bad(
-            "expected a grey PFM (\"Pf\", width, height, scale)".into()
-        ));
-    }
+    let channels = match tokens.first().map(String::as_str) {
+        Some("Pf") if tokens.len() == 4 => 1usize,
+        Some("PF") if tokens.len() == 4 => 3,
+        _ => {
+            return Err(bad(
+                "expected a PFM (\"Pf\" or \"PF\", width, height, scale)".into(),
+            ));
+        }
+    };
     let parse = |t: &str| {
         t.parse::<u32>()
             .map_err(|_| bad(format!("expected a size, got \"{t}\"")))
@@ -629,34 +680,41 @@ pub fn read_pfm_within(
     let scale: f32 = tokens[3]
         .parse()
         .map_err(|_| bad(format!("expected the scale, got \"{}\"", tokens[3])))?;
-    if (w, h) != expect {
+    if let Some((ew, eh)) = expect
+        && (w, h) != (ew, eh)
+    {
         return Err(bad(format!(
-            "the depth image is {w}x{h} but the sample grid is {}x{}",
-            expect.0, expect.1
+            "the image is {w}x{h} but {ew}x{eh} is expected (the sample grid, or the other image)"
         )));
     }
     let n = (w as usize) * (h as usize);
+    let need = u64::try_from(4 * n * channels).unwrap_or(u64::MAX);
+    budget
+        .reserve(need, || format!("decoding the {w}x{h} PFM"))
+        .map_err(|e| bad(e.to_string()))?;
+    budget.release(need);
     let data = bytes.get(i..).unwrap_or_default();
-    if data.len() < 4 * n {
+    if data.len() < 4 * n * channels {
         return Err(bad(format!(
-            "the data holds {} bytes, {w}x{h} floats need {}",
+            "the data holds {} bytes, {w}x{h}x{channels} floats need {}",
             data.len(),
-            4 * n
+            4 * n * channels
         )));
     }
     let little = scale < 0.0;
-    let mut out = vec![0.0f32; n];
-    for (k, c) in data.chunks_exact(4).take(n).enumerate() {
+    let mut out = vec![0.0f32; n * channels];
+    let row = (w as usize) * channels;
+    for (k, c) in data.chunks_exact(4).take(n * channels).enumerate() {
         let b = [c[0], c[1], c[2], c[3]];
         let v = if little {
             f32::from_le_bytes(b)
         } else {
             f32::from_be_bytes(b)
         };
-        let (row, col) = (k / w as usize, k % w as usize);
-        out[(h as usize - 1 - row) * w as usize + col] = v;
+        let (y, x) = (k / row, k % row);
+        out[(h as usize - 1 - y) * row + x] = v;
     }
-    Ok(out)
+    Ok((w, h, channels, out))
 }
 
 #[cfg(test)]

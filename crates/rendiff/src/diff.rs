@@ -92,6 +92,8 @@ pub enum Output {
         pixels: Vec<Rgb>,
         /// Read as 16-bit linear (else 8-bit sRGB).
         linear16: bool,
+        /// Read from a float image (PFM): no rounding to allow for.
+        float: bool,
         /// How long POV-Ray took, when it rendered the image just now.
         rendered_ms: Option<f64>,
     },
@@ -122,8 +124,16 @@ impl Output {
         match self {
             Output::Frame(..) => compare::Quantisation::Exact,
             Output::External(_, q) => *q,
+            Output::Image { float: true, .. } => compare::Quantisation::Exact,
             Output::Image { linear16: true, .. } => compare::Quantisation::Linear16,
             Output::Image { .. } => compare::Quantisation::Srgb8,
+        }
+    }
+
+    fn width_height(&self) -> (u32, u32) {
+        match self {
+            Output::Frame(f, _) | Output::External(f, _) => (f.width, f.height),
+            Output::Image { width, height, .. } => (*width, *height),
         }
     }
 
@@ -274,6 +284,7 @@ fn produce(job: &Prepared, side: &Side, max_depth: u32) -> Result<(Output, Optio
                     height: img.height,
                     pixels: img.pixels,
                     linear16: img.linear16,
+                    float: false,
                     rendered_ms: render.then(|| started.elapsed().as_secs_f64() * 1e3),
                 },
                 stale_note,
@@ -315,6 +326,7 @@ fn produce(job: &Prepared, side: &Side, max_depth: u32) -> Result<(Output, Optio
                 height: img.height,
                 pixels: img.pixels,
                 linear16: img.linear16,
+                float: false,
                 rendered_ms: None,
             }
         }
@@ -338,11 +350,27 @@ pub fn diff_images(
     fuzzy: Option<compare::Fuzzy>,
     budget: &crate::budget::Budget,
 ) -> Result<DiffResult, Error> {
-    let img_a = image_io::read_png_linear_within(a, None, budget)?;
-    let img_b = image_io::read_png_linear_within(b, Some((img_a.width, img_a.height)), budget)?;
-    Ok(diff_image_data(
-        (&a.display().to_string(), img_a),
-        (&b.display().to_string(), img_b),
+    let is_pfm = |p: &Path| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("pfm"));
+    let read = |p: &Path, expect| {
+        if is_pfm(p) {
+            image_io::read_pfm_linear_within(p, expect, budget)
+        } else {
+            image_io::read_png_linear_within(p, expect, budget)
+        }
+    };
+    let img_a = read(a, None)?;
+    let img_b = read(b, Some((img_a.width, img_a.height)))?;
+    let image = |img: image_io::LinearImage, float: bool| Output::Image {
+        width: img.width,
+        height: img.height,
+        pixels: img.pixels,
+        linear16: img.linear16,
+        float,
+        rendered_ms: None,
+    };
+    Ok(diff_outputs(
+        (&a.display().to_string(), image(img_a, is_pfm(a))),
+        (&b.display().to_string(), image(img_b, is_pfm(b))),
         fuzzy,
     ))
 }
@@ -364,10 +392,19 @@ pub fn diff_image_data(
         height: img.height,
         pixels: img.pixels,
         linear16: img.linear16,
+        float: false,
         rendered_ms: None,
     };
-    let (width, height) = (img_a.width, img_a.height);
-    let (out_a, out_b) = (image(img_a), image(img_b));
+    diff_outputs((la, image(img_a)), (lb, image(img_b)), fuzzy)
+}
+
+/// Two images as [`Output::Image`]s, compared.
+fn diff_outputs(
+    (la, out_a): (&str, Output),
+    (lb, out_b): (&str, Output),
+    fuzzy: Option<compare::Fuzzy>,
+) -> DiffResult {
+    let (width, height) = (out_a.width_height().0, out_a.width_height().1);
     let tol = compare::image_tolerances();
     let image_tol = ImageTolerances {
         fuzzy,

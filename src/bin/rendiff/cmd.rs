@@ -617,7 +617,10 @@ fn diff(a: &DiffArgs) -> Result<Outcome> {
             "--backend{given}: diff compares two sides: use --a and --b (e.g. --a raster --b {example})"
         );
     }
-    let is_png = |p: &PathBuf| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("png"));
+    let is_png = |p: &PathBuf| {
+        p.extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("png") || e.eq_ignore_ascii_case("pfm"))
+    };
     if a.scenes.iter().any(is_png) {
         return diff_two_images(a, a.scenes.iter().all(is_png));
     }
