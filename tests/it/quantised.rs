@@ -259,3 +259,47 @@ fn float_images_compare_exactly() {
     assert_eq!(code, 2, "{text}");
     assert!(text.contains("bad.pfm"), "{text}");
 }
+
+#[test]
+fn openexr_images_compare_exactly() {
+    let dir = tempfile::tempdir().unwrap();
+    let write = |name: &str, bump: f32| {
+        exr::prelude::write_rgb_file(dir.path().join(name), 6, 4, |x, y| {
+            #[expect(clippy::cast_precision_loss, reason = "a 6x4 image")]
+            let v = (x + 6 * y) as f32 / 24.0;
+            let extra = if (x, y) == (2, 3) { bump } else { 0.0 };
+            (v, v * 0.5 + extra, 1.0 - v)
+        })
+        .unwrap();
+    };
+    write("a.exr", 0.0);
+    write("same.exr", 0.0);
+    write("moved.exr", 1e-3);
+    let (code, json) = rendiff(&["diff", "a.exr", "same.exr", "--json"], dir.path());
+    assert_eq!((code, over(&json)), (0, 0), "{json}");
+    let (code, json) = rendiff(&["diff", "a.exr", "moved.exr", "--json"], dir.path());
+    assert_eq!((code, over(&json)), (1, 1), "{json}");
+    let v: serde_json::Value = serde_json::from_str(&json).unwrap();
+    let c = &v["clusters"]["list"][0]["box"];
+    assert_eq!(
+        (c["x0"].as_u64(), c["y0"].as_u64()),
+        (Some(2), Some(3)),
+        "{json}"
+    );
+    // An EXR against a PNG of another size: exit 2 naming the file.
+    image_io::write_png(
+        &dir.path().join("small.png"),
+        2,
+        2,
+        &[Rgb::BLACK; 4],
+        PngEncoding::Srgb8,
+    )
+    .unwrap();
+    let (code, text) = rendiff(&["diff", "a.exr", "small.png"], dir.path());
+    assert_eq!(code, 2, "{text}");
+    assert!(text.contains("small.png"), "{text}");
+    std::fs::write(dir.path().join("bad.exr"), b"not an exr").unwrap();
+    let (code, text) = rendiff(&["diff", "bad.exr", "a.exr"], dir.path());
+    assert_eq!(code, 2, "{text}");
+    assert!(text.contains("bad.exr"), "{text}");
+}

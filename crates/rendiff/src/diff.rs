@@ -350,12 +350,15 @@ pub fn diff_images(
     fuzzy: Option<compare::Fuzzy>,
     budget: &crate::budget::Budget,
 ) -> Result<DiffResult, Error> {
-    let is_pfm = |p: &Path| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("pfm"));
-    let read = |p: &Path, expect| {
-        if is_pfm(p) {
-            image_io::read_pfm_linear_within(p, expect, budget)
+    let ext = |p: &Path, e: &str| p.extension().is_some_and(|x| x.eq_ignore_ascii_case(e));
+    let is_pfm = |p: &Path| ext(p, "pfm") || ext(p, "exr");
+    let read = |p: &Path, expect| -> Result<image_io::LinearImage, Error> {
+        if ext(p, "exr") {
+            read_exr(p, expect, budget)
+        } else if ext(p, "pfm") {
+            Ok(image_io::read_pfm_linear_within(p, expect, budget)?)
         } else {
-            image_io::read_png_linear_within(p, expect, budget)
+            Ok(image_io::read_png_linear_within(p, expect, budget)?)
         }
     };
     let img_a = read(a, None)?;
@@ -373,6 +376,81 @@ pub fn diff_images(
         (&b.display().to_string(), image(img_b, is_pfm(b))),
         fuzzy,
     ))
+}
+
+/// An OpenEXR image's first RGB(A) layer at its largest resolution, as
+/// linear colour (alpha ignored, non-finite values 0); its header's size
+/// is checked against `expect` and the budget before any pixel is read.
+#[cfg(feature = "exr")]
+fn read_exr(
+    path: &Path,
+    expect: Option<(u32, u32)>,
+    budget: &crate::budget::Budget,
+) -> Result<image_io::LinearImage, Error> {
+    use exr::prelude::{ReadChannels, ReadLayers};
+    let bad = |message: String| {
+        Error::Image(image_io::ImageIoError::Png {
+            path: path.to_path_buf(),
+            message,
+        })
+    };
+    let meta = exr::meta::MetaData::read_from_file(path, false)
+        .map_err(|e| bad(format!("not a readable OpenEXR image: {e}")))?;
+    let size = meta
+        .headers
+        .first()
+        .map(|h| h.layer_size)
+        .ok_or_else(|| bad("an OpenEXR image without layers".into()))?;
+    let (w, h) = (
+        u32::try_from(size.width()).map_err(|_| bad("too wide".into()))?,
+        u32::try_from(size.height()).map_err(|_| bad("too tall".into()))?,
+    );
+    if let Some((ew, eh)) = expect
+        && (w, h) != (ew, eh)
+    {
+        return Err(bad(format!(
+            "the image is {w}x{h} but {ew}x{eh} is expected"
+        )));
+    }
+    let need = u64::from(w) * u64::from(h) * 28;
+    budget
+        .reserve(need, || format!("decoding the {w}x{h} OpenEXR image"))
+        .map_err(|e| bad(e.to_string()))?;
+    budget.release(need);
+    let width = size.width();
+    let image = exr::prelude::read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .rgba_channels(
+            move |res, _| vec![Rgb::BLACK; res.width() * res.height()],
+            move |px: &mut Vec<Rgb>, pos, (r, g, b, _a): (f32, f32, f32, f32)| {
+                let f = |v: f32| if v.is_finite() { v } else { 0.0 };
+                px[pos.y() * width + pos.x()] = Rgb::new(f(r), f(g), f(b));
+            },
+        )
+        .first_valid_layer()
+        .all_attributes()
+        .from_file(path)
+        .map_err(|e| bad(format!("could not read the OpenEXR image: {e}")))?;
+    Ok(image_io::LinearImage {
+        width: w,
+        height: h,
+        pixels: image.layer_data.channel_data.pixels,
+        linear16: false,
+    })
+}
+
+/// Without the `exr` feature an OpenEXR image is refused by name.
+#[cfg(not(feature = "exr"))]
+fn read_exr(
+    path: &Path,
+    _expect: Option<(u32, u32)>,
+    _budget: &crate::budget::Budget,
+) -> Result<image_io::LinearImage, Error> {
+    Err(Error::Usage(format!(
+        "{}: this build of rendiff reads no OpenEXR (enable the `exr` feature)",
+        path.display()
+    )))
 }
 
 /// As [`diff_images`], on images already read (or made: an image rounded

@@ -618,8 +618,11 @@ fn diff(a: &DiffArgs) -> Result<Outcome> {
         );
     }
     let is_png = |p: &PathBuf| {
-        p.extension()
-            .is_some_and(|e| e.eq_ignore_ascii_case("png") || e.eq_ignore_ascii_case("pfm"))
+        p.extension().is_some_and(|e| {
+            ["png", "pfm", "exr"]
+                .iter()
+                .any(|x| e.eq_ignore_ascii_case(x))
+        })
     };
     if a.scenes.iter().any(is_png) {
         return diff_two_images(a, a.scenes.iter().all(is_png));
