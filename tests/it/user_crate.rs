@@ -100,6 +100,24 @@ fn a_users_crate_keeps_its_scene_under_regression() {
     assert!(!pending.exists());
     let (ok, out) = cargo_test(&dir);
     assert!(ok, "after accepting:\n{out}");
+    // `rendiff golden --accept` accepts as review --accept-all does.
+    let edited = std::fs::read_to_string(&scene).unwrap();
+    std::fs::write(&scene, edited.replace("phong = 0.5", "phong = 0.9")).unwrap();
+    assert!(!cargo_test(&dir).0, "a changed phong fails");
+    assert!(pending.exists());
+    let o = Command::new(env!("CARGO_BIN_EXE_rendiff"))
+        .args(["golden", "--accept"])
+        .current_dir(&dir)
+        .output()
+        .unwrap();
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(!pending.exists());
+    assert!(cargo_test(&dir).0, "after golden --accept");
     // Reverted and rejected: the golden stays, the pending file goes.
     std::fs::write(&scene, text).unwrap();
     let (ok, _) = cargo_test(&dir);

@@ -289,6 +289,16 @@ pub struct GoldenArgs {
     /// path's hash names, the same on every machine and run.
     #[arg(long, value_name = "K/N", value_parser = parse_shard)]
     pub shard: Option<(u64, u64)>,
+    /// Accept every pending snapshot image (NAME.new.png) under DIR (default
+    /// tests/golden) instead: as `rendiff review DIR --accept-all`.
+    #[arg(
+        long,
+        value_name = "DIR",
+        num_args = 0..=1,
+        default_missing_value = "tests/golden",
+        conflicts_with_all = ["update", "shard"]
+    )]
+    pub accept: Option<PathBuf>,
 }
 
 /// `rendiff diff`.

@@ -436,6 +436,19 @@ fn scene_list(given: &[PathBuf]) -> Result<Vec<PathBuf>> {
 
 fn golden(a: &GoldenArgs) -> Result<Outcome> {
     use rendiff::pov::golden;
+    if let Some(dir) = &a.accept {
+        if !a.scenes.is_empty() {
+            bail!(
+                "--accept: accepts the pending snapshot images under a folder; it takes no scenes"
+            );
+        }
+        return review(&ReviewArgs {
+            dir: dir.clone(),
+            accept_all: true,
+            reject_all: false,
+            out: None,
+        });
+    }
     let scenes = shard(scene_list(&a.scenes)?, a.shard);
     // Load every scene first: bad input fails (naming its file) before
     // POV-Ray is looked for or anything renders.
