@@ -24,9 +24,9 @@ fn rendiff(args: &[&str], dir: &Path) -> (i32, String) {
 const SIZE: &str = "96x72";
 
 /// The ray tracer's G-buffer written as another renderer would hand it
-/// over: `color.png`, `id.png`, `depth.pfm`.
+/// over: `color.png`, `id.png`, `depth.pfm` (what `render --gbuffer`
+/// writes).
 fn export(scene: &str, dir: &Path) {
-    std::fs::create_dir_all(dir.join("g")).unwrap();
     let s = scene_path(scene);
     let (code, text) = rendiff(
         &[
@@ -40,9 +40,8 @@ fn export(scene: &str, dir: &Path) {
             "1",
             "--size",
             SIZE,
-            "--linear16",
             "-o",
-            "g/color.png",
+            "picture.png",
             "--gbuffer",
             "g",
         ],
@@ -147,4 +146,54 @@ fn a_broken_gbuffer_is_refused_naming_the_file() {
     let (code, _, text) = diff("spheres", dir, "g");
     assert_eq!(code, 2, "{text}");
     assert!(text.contains("color.png"), "{text}");
+}
+
+#[test]
+fn a_supersampled_gbuffer_is_read_at_its_sample_grid() {
+    // What `render --gbuffer` writes at 2×2 samples is what `diff --b`
+    // reads: colour, ids and depth at the 192×144 sample grid.
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let s = scene_path("spheres");
+    let s = s.to_str().unwrap();
+    let (code, text) = rendiff(
+        &[
+            "render",
+            s,
+            "--backend",
+            "ray",
+            "--max-depth",
+            "1",
+            "--samples",
+            "2",
+            "--size",
+            SIZE,
+            "-o",
+            "p.png",
+            "--gbuffer",
+            "g",
+        ],
+        dir,
+    );
+    assert_eq!(code, 0, "{text}");
+    let (code, text) = rendiff(
+        &[
+            "diff",
+            s,
+            "--a",
+            "raster",
+            "--b",
+            "g",
+            "--samples",
+            "2",
+            "--size",
+            SIZE,
+            "--json",
+        ],
+        dir,
+    );
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(v["visibility"]["real"], 0, "{text}");
+    assert_eq!(v["shading"]["over_threshold"], 0, "{text}");
+    assert_eq!(code, 0, "{text}");
 }

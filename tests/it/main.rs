@@ -34,6 +34,8 @@ mod hazards;
 mod hostile;
 /// Hidden lines: Appel's QI against ray counts and the z-buffer.
 mod lines;
+/// OBJ faces as exporters write them: keyhole faces load as rings.
+mod obj_faces;
 /// The painter's algorithm against the z-buffer.
 mod painter;
 /// The render plan: invariance with and without it, and each skip firing.

@@ -303,3 +303,83 @@ fn openexr_images_compare_exactly() {
     assert_eq!(code, 2, "{text}");
     assert!(text.contains("bad.exr"), "{text}");
 }
+
+#[test]
+fn red_team_findings_stay_fixed() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // Two 8-bit images one code apart differ (their intervals only touch).
+    let a: Vec<Rgb> = (0..12u8)
+        .map(|k| Rgb::splat(rendiff::color::srgb_decode(f32::from(100 + k) / 255.0)))
+        .collect();
+    let mut b = a.clone();
+    b[5] = Rgb::splat(rendiff::color::srgb_decode(106.0 / 255.0));
+    image_io::write_png(&d.join("a.png"), 4, 3, &a, PngEncoding::Srgb8).unwrap();
+    image_io::write_png(&d.join("b.png"), 4, 3, &b, PngEncoding::Srgb8).unwrap();
+    let (code, json) = rendiff(&["diff", "a.png", "b.png", "--json"], d);
+    assert_eq!((code, over(&json)), (1, 1), "{json}");
+    // A float image with NaN is refused naming the pixel; HDR values are
+    // compared unclamped.
+    let write_pf = |name: &str, values: &[f32]| {
+        let mut bytes = b"PF\n2 1\n-1.0\n".to_vec();
+        for v in values {
+            bytes.extend_from_slice(&v.to_le_bytes());
+        }
+        std::fs::write(d.join(name), bytes).unwrap();
+    };
+    write_pf("nan.pfm", &[0.5, f32::NAN, 0.5, 0.5, 0.5, 0.5]);
+    write_pf("two.pfm", &[2.0; 6]);
+    write_pf("five.pfm", &[5.0; 6]);
+    let (code, text) = rendiff(&["diff", "two.pfm", "nan.pfm"], d);
+    assert_eq!(code, 2, "{text}");
+    assert!(
+        text.contains("nan.pfm") && text.contains("(0, 0)"),
+        "{text}"
+    );
+    let (code, json) = rendiff(&["diff", "two.pfm", "five.pfm", "--json"], d);
+    assert_eq!((code, over(&json)), (1, 2), "{json}");
+    // Flags that need a scene are refused with two images; --fuzzy with two
+    // backends too.
+    let (code, text) = rendiff(&["diff", "a.png", "b.png", "--size", "4x3"], d);
+    assert_eq!(code, 2, "{text}");
+    assert!(text.contains("--size"), "{text}");
+    let s = scene_path("spheres");
+    let (code, text) = rendiff(&["diff", s.to_str().unwrap(), "--fuzzy", "2,2"], d);
+    assert_eq!(code, 2, "{text}");
+    // report: a folder with no report fails the merge; verdicts are pass or fail.
+    std::fs::create_dir(d.join("empty")).unwrap();
+    let (code, text) = rendiff(&["report", "empty"], d);
+    assert_eq!(code, 2, "{text}");
+    std::fs::write(
+        d.join("weird.json"),
+        r#"{"scene": "x", "verdict": "weird"}"#,
+    )
+    .unwrap();
+    let (code, text) = rendiff(&["report", "weird.json"], d);
+    assert_eq!(code, 2, "{text}");
+    // review: a size-changed snapshot is a verdict that can be accepted, a
+    // pending file that is not a PNG can be rejected but not accepted, and
+    // --out makes the nested folders.
+    let g = d.join("golden/scenes");
+    std::fs::create_dir_all(&g).unwrap();
+    image_io::write_png(&g.join("x.ray.png"), 4, 3, &a, PngEncoding::Srgb8).unwrap();
+    image_io::write_png(&g.join("x.ray.new.png"), 2, 2, &a[..4], PngEncoding::Srgb8).unwrap();
+    image_io::write_png(&g.join("y.ray.png"), 4, 3, &a, PngEncoding::Srgb8).unwrap();
+    image_io::write_png(&g.join("y.ray.new.png"), 4, 3, &b, PngEncoding::Srgb8).unwrap();
+    std::fs::write(g.join("z.ray.new.png"), "junk").unwrap();
+    let (code, text) = rendiff(&["review", "golden", "--accept-all", "--out", "rev"], d);
+    assert_eq!(code, 1, "the junk file stays pending: {text}");
+    assert!(
+        text.contains("differs") && text.contains("not accepted"),
+        "{text}"
+    );
+    assert!(d.join("rev/scenes/y.ray/index.html").exists(), "{text}");
+    assert!(!g.join("x.ray.new.png").exists() && !g.join("y.ray.new.png").exists());
+    assert!(
+        !g.join("z.ray.png").exists(),
+        "junk was never made a golden"
+    );
+    let (code, text) = rendiff(&["review", "golden", "--reject-all"], d);
+    assert_eq!(code, 0, "{text}");
+    assert!(!g.join("z.ray.new.png").exists());
+}

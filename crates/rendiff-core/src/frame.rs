@@ -266,13 +266,23 @@ impl Frame {
             source,
         })?;
         let (w, h) = (self.sample_width(), self.sample_height());
-        let [depth, id, flags] = GBUFFER_FILES;
+        let [depth, id, flags, color] = GBUFFER_FILES;
         image_io::write_pfm(&dir.join(depth), w, h, &self.depth)?;
         let ids: Vec<u32> = self.id.iter().map(|&i| i.wrapping_add(1)).collect();
         image_io::write_png_u32(&dir.join(id), w, h, &ids)?;
-        image_io::write_png_u32(&dir.join(flags), w, h, &self.flags)
+        image_io::write_png_u32(&dir.join(flags), w, h, &self.flags)?;
+        image_io::write_png(
+            &dir.join(color),
+            w,
+            h,
+            self.sample_colors(),
+            image_io::PngEncoding::Linear16,
+        )
     }
 }
 
-/// The files [`Frame::write_gbuffer`] writes into its folder.
-pub const GBUFFER_FILES: [&str; 3] = ["depth.pfm", "id.png", "flags.png"];
+/// The files [`Frame::write_gbuffer`] writes into its folder, all at the
+/// sample grid: depth, triangle id + 1, shading flags, and the sample
+/// colours (16-bit linear) — the folder `rendiff diff --b DIR` reads as
+/// another renderer's G-buffer.
+pub const GBUFFER_FILES: [&str; 4] = ["depth.pfm", "id.png", "flags.png", "color.png"];

@@ -608,8 +608,7 @@ pub fn read_pfm_within(
 
 /// Reads a PFM image (`PF` colour or `Pf` grey, either byte order) as
 /// linear colour, rows top to bottom; `expect` the size when given. Values
-/// are kept as stored (a float image is not rounded), non-finite ones
-/// become 0.
+/// are kept as stored (a float image is not rounded, nor clamped).
 ///
 /// # Errors
 ///
@@ -620,12 +619,29 @@ pub fn read_pfm_linear_within(
     budget: &crate::budget::Budget,
 ) -> Result<LinearImage, ImageIoError> {
     let (width, height, channels, values) = read_pfm(path, expect, budget)?;
-    let f = |v: f32| if v.is_finite() { v } else { 0.0 };
+    if width == 0 || height == 0 {
+        return Err(ImageIoError::Png {
+            path: path.to_path_buf(),
+            message: format!("the image is {width}x{height}: it has no pixels"),
+        });
+    }
+    if let Some(k) = values.iter().position(|v| !v.is_finite()) {
+        let px = k / channels;
+        return Err(ImageIoError::Png {
+            path: path.to_path_buf(),
+            message: format!(
+                "pixel ({}, {}) holds {}: a colour must be finite",
+                px % width as usize,
+                px / width as usize,
+                values[k]
+            ),
+        });
+    }
     let pixels = values
         .chunks_exact(channels)
         .map(|c| match c {
-            [g] => Rgb::new(f(*g), f(*g), f(*g)),
-            [r, g, b] => Rgb::new(f(*r), f(*g), f(*b)),
+            [g] => Rgb::new(*g, *g, *g),
+            [r, g, b] => Rgb::new(*r, *g, *b),
             _ => Rgb::BLACK,
         })
         .collect();

@@ -25,9 +25,8 @@ pub enum Side {
     /// of every sample), `id.png` (rendiff's triangle id + 1 per sample as
     /// a little-endian u32 in RGBA8, 0 for the background) and `depth.pfm`
     /// (`t` along the unit primary ray, +∞ for the background), all at the
-    /// scene's sample grid — the files `rendiff render --gbuffer` writes,
-    /// with the picture as `color.png`. Its disagreements are classified
-    /// like a backend's.
+    /// scene's sample grid — the files `rendiff render --gbuffer` writes.
+    /// Its disagreements are classified like a backend's.
     External(PathBuf),
     /// The POV-Ray reference: stored in the golden folder, or rendered now.
     Pov {
@@ -424,18 +423,27 @@ fn read_exr(
         .rgba_channels(
             move |res, _| vec![Rgb::BLACK; res.width() * res.height()],
             move |px: &mut Vec<Rgb>, pos, (r, g, b, _a): (f32, f32, f32, f32)| {
-                let f = |v: f32| if v.is_finite() { v } else { 0.0 };
-                px[pos.y() * width + pos.x()] = Rgb::new(f(r), f(g), f(b));
+                px[pos.y() * width + pos.x()] = Rgb::new(r, g, b);
             },
         )
         .first_valid_layer()
         .all_attributes()
         .from_file(path)
         .map_err(|e| bad(format!("could not read the OpenEXR image: {e}")))?;
+    let pixels = image.layer_data.channel_data.pixels;
+    if let Some(k) = pixels.iter().position(|c| !c.is_finite()) {
+        let (x, y) = (k % width, k / width);
+        return Err(bad(format!(
+            "pixel ({x}, {y}) is not finite: a colour must be"
+        )));
+    }
+    if w == 0 || h == 0 {
+        return Err(bad(format!("the image is {w}x{h}: it has no pixels")));
+    }
     Ok(image_io::LinearImage {
         width: w,
         height: h,
-        pixels: image.layer_data.channel_data.pixels,
+        pixels,
         linear16: false,
     })
 }
@@ -552,9 +560,12 @@ fn read_external(job: &Prepared, dir: &Path) -> Result<(Frame, compare::Quantisa
                 id - 1
             )));
         }
-        if !(d.is_finite() || d == f32::INFINITY) || (id != 0 && !d.is_finite()) {
+        if !(d.is_finite() || d == f32::INFINITY)
+            || (id != 0 && !(d.is_finite() && d > 0.0))
+            || (id == 0 && d != f32::INFINITY)
+        {
             return Err(Error::Usage(format!(
-                "{}: sample ({}, {}) has depth {d}; expected a finite t for a surface, +inf for the background",
+                "{}: sample ({}, {}) has depth {d}; expected a finite t > 0 for a surface, +inf for the background",
                 dir.join("depth.pfm").display(),
                 i % sw,
                 i / sw

@@ -630,6 +630,32 @@ fn diff(a: &DiffArgs) -> Result<Outcome> {
             "--backend{given}: diff compares two sides: use --a and --b (e.g. --a raster --b {example})"
         );
     }
+    let image_ext = |p: &PathBuf| {
+        p.extension().is_some_and(|e| {
+            ["png", "pfm", "exr"]
+                .iter()
+                .any(|x| e.eq_ignore_ascii_case(x))
+        })
+    };
+    if a.scenes.len() == 2 && a.scenes.iter().all(image_ext) {
+        let f = &a.flags;
+        let scene_only = [
+            ("--size", f.size.is_some()),
+            ("--samples", f.samples.is_some()),
+            ("--gbuffer", f.gbuffer.is_some()),
+            ("--depth", f.depth.is_some()),
+            ("--shadows", f.shadows.is_some()),
+            ("--geometry", f.geometry.is_some()),
+            ("--max-depth", f.max_depth.is_some()),
+            ("--sort", f.sort.is_some()),
+            ("--no-plan", f.no_plan),
+            ("--shard", a.shard.is_some()),
+            ("--render", a.render),
+        ];
+        if let Some((flag, _)) = scene_only.iter().find(|(_, on)| *on) {
+            bail!("{flag}: two images are compared as they are; {flag} applies to scenes");
+        }
+    }
     let is_png = |p: &PathBuf| {
         p.extension().is_some_and(|e| {
             ["png", "pfm", "exr"]
@@ -642,6 +668,15 @@ fn diff(a: &DiffArgs) -> Result<Outcome> {
     }
     let ov = overrides(&a.flags)?;
     let (side_a, side_b) = diff_sides(a, &ov)?;
+    if a.fuzzy.is_some()
+        && [&side_a, &side_b]
+            .iter()
+            .all(|s| matches!(s, diff::Side::Backend(_)))
+    {
+        bail!(
+            "--fuzzy: the rule is for comparisons against an image (--b PATH.png or pov); two backends are judged sample by sample"
+        );
+    }
     let scenes = shard(a.scenes.clone(), a.shard);
     if scenes.is_empty() {
         // A shard may hold none of a short list: an empty result, not an error.
@@ -1160,26 +1195,42 @@ fn review(a: &ReviewArgs) -> Result<Outcome> {
             .display()
             .to_string();
         say(&format!("[{}/{}] {name}\n", k + 1, pending.len()))?;
-        if p.golden.exists() {
-            let r = rendiff::diff::diff_images(&p.golden, &p.pending, None, &budget)?;
-            say(&r.report.summary())?;
-            if let Some(out) = &a.out {
-                let dir = out.join(name.trim_end_matches(snapshot::PENDING_SUFFIX));
-                let o = rendiff::output::OutputDir::begin(
-                    &dir,
-                    &[p.golden.clone(), p.pending.clone()],
-                )?;
-                rendiff::diff::write_outputs(
-                    &r,
-                    None,
-                    o.path(),
-                    rendiff::image_io::PngEncoding::Srgb8,
-                )?;
-                o.commit()?;
-                say(&format!(
-                    "  pictures: {}\n",
-                    dir.join("index.html").display()
-                ))?;
+        // A pending file that is not a readable PNG can be rejected, never
+        // accepted.
+        let readable = rendiff::image_io::read_png_linear_within(&p.pending, None, &budget)
+            .map_err(|e| e.to_string());
+        if let Err(e) = &readable {
+            say(&format!("  not a readable image: {e}\n"))?;
+        } else if p.golden.exists() {
+            match rendiff::diff::diff_images(&p.golden, &p.pending, None, &budget) {
+                Ok(r) => {
+                    say(&r.report.summary())?;
+                    if let Some(out) = &a.out {
+                        let dir = out.join(name.trim_end_matches(snapshot::PENDING_SUFFIX));
+                        if let Some(parent) = dir.parent() {
+                            std::fs::create_dir_all(parent).with_context(|| {
+                                format!("could not create {}", parent.display())
+                            })?;
+                        }
+                        let o = rendiff::output::OutputDir::begin(
+                            &dir,
+                            &[p.golden.clone(), p.pending.clone(), a.dir.clone()],
+                        )?;
+                        rendiff::diff::write_outputs(
+                            &r,
+                            None,
+                            o.path(),
+                            rendiff::image_io::PngEncoding::Srgb8,
+                        )?;
+                        o.commit()?;
+                        say(&format!(
+                            "  pictures: {}\n",
+                            dir.join("index.html").display()
+                        ))?;
+                    }
+                }
+                // A changed size (or an unreadable golden) is a verdict too.
+                Err(e) => say(&format!("  differs: {e}\n"))?,
             }
         } else {
             say(&format!("  new: no golden yet at {}\n", p.golden.display()))?;
@@ -1197,6 +1248,10 @@ fn review(a: &ReviewArgs) -> Result<Outcome> {
             's'
         };
         match choice {
+            'a' | 'A' if readable.is_err() => {
+                say("  not accepted: it is not a readable image (reject it)\n")?;
+                left += 1;
+            }
             'a' | 'A' => {
                 p.accept()?;
                 say(&format!("  accepted: {}\n", p.golden.display()))?;
@@ -1296,13 +1351,16 @@ fn report(a: &ReportArgs) -> Result<Outcome> {
                 .get("scene")
                 .and_then(serde_json::Value::as_str)
                 .is_none()
+                || !matches!(
+                    item.get("verdict").and_then(serde_json::Value::as_str),
+                    Some("pass" | "fail")
+                )
                 || item
-                    .get("verdict")
-                    .and_then(serde_json::Value::as_str)
-                    .is_none()
+                    .get("schema_version")
+                    .is_some_and(|v| v.as_u64() != Some(2))
             {
                 bail!(
-                    "{}: expected reports with \"scene\" and \"verdict\" (the JSON of `rendiff diff --json`)",
+                    "{}: expected reports with \"scene\" and a \"verdict\" of pass or fail, schema_version 2 (the JSON of `rendiff diff --json`)",
                     path.display()
                 );
             }
@@ -1312,11 +1370,30 @@ fn report(a: &ReportArgs) -> Result<Outcome> {
     }
     let mut all = Vec::new();
     for p in &a.inputs {
+        let before = all.len();
         collect(p, &mut all)?;
+        if all.len() == before {
+            // A shard's artefact that is missing must not turn the merge green.
+            bail!(
+                "{}: holds no report (expected the JSON of `rendiff diff --json`, or folders with report.json)",
+                p.display()
+            );
+        }
     }
     let str_of = |v: &serde_json::Value, k: &str| v[k].as_str().unwrap_or_default().to_string();
     all.sort_by_key(|v| (str_of(v, "scene"), str_of(v, "a"), str_of(v, "b")));
     let failed = all.iter().filter(|v| v["verdict"] != "pass").count();
+    for w in all.windows(2) {
+        let key = |v: &serde_json::Value| (str_of(v, "scene"), str_of(v, "a"), str_of(v, "b"));
+        if key(&w[0]) == key(&w[1]) {
+            warn(&format!(
+                "{}: {} vs {} is reported twice (overlapping shards or inputs)",
+                str_of(&w[0], "scene"),
+                str_of(&w[0], "a"),
+                str_of(&w[0], "b")
+            ));
+        }
+    }
     if a.json {
         emit(format!("{}\n", serde_json::to_string_pretty(&all)?).as_bytes())?;
     } else {

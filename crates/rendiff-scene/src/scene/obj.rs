@@ -176,6 +176,66 @@ fn tokenize<'a>(content: &'a str, out: &mut Vec<&'a str>) {
 
 /// A polygon error of a face with more than three corners, in the face's
 /// own terms: its corners as written on the line.
+/// The rings of a face as corner indices: the face itself, or, for a
+/// keyhole face, its outline first and then its holes. A keyhole face
+/// (how several exporters write a face with a hole: LightWave, assimp's
+/// `concave_polygon.obj`) walks a bridge edge from the outline to a hole
+/// and, after going round the hole, straight back; cutting both copies of
+/// every such edge (the same two positions, once each way) leaves closed
+/// rings. The ring of the largest area is the outline (it keeps the
+/// face's winding); the rest are its holes. Faces without a bridge, and
+/// any cut that would leave a ring of fewer than three corners, stay as
+/// given (the triangulator then names the spike).
+fn keyhole_rings(v: &[u32], pts: &[DVec3]) -> Vec<Vec<usize>> {
+    let mut rings = vec![(0..v.len()).collect::<Vec<usize>>()];
+    'cut: loop {
+        for r in 0..rings.len() {
+            let ring = &rings[r];
+            let n = ring.len();
+            let at = |k: usize| v[ring[k % n]];
+            for i in 0..n {
+                let (a, b) = (at(i), at(i + 1));
+                if a == b {
+                    continue;
+                }
+                for j in i + 1..n {
+                    if at(j) == b && at(j + 1) == a {
+                        // ring[i+1 .. j] (from b round to before the second
+                        // b) and ring[j+1 ..] + ring[.. i] (from a round to
+                        // before the first a).
+                        let inner: Vec<usize> = ring[i + 1..j].to_vec();
+                        let outer: Vec<usize> = ring[(j + 1).min(n)..]
+                            .iter()
+                            .chain(&ring[..i])
+                            .copied()
+                            .collect();
+                        if inner.len() < 3 || outer.len() < 3 {
+                            continue;
+                        }
+                        rings.splice(r..=r, [outer, inner]);
+                        continue 'cut;
+                    }
+                }
+            }
+        }
+        break;
+    }
+    if rings.len() > 1 {
+        let area = |ring: &[usize]| {
+            let mut s = DVec3::ZERO;
+            for k in 0..ring.len() {
+                s += pts[ring[k]].cross(pts[ring[(k + 1) % ring.len()]]);
+            }
+            s.length()
+        };
+        let outer = (0..rings.len())
+            .max_by(|&x, &y| area(&rings[x]).total_cmp(&area(&rings[y])))
+            .unwrap_or(0);
+        rings.swap(0, outer);
+    }
+    rings
+}
+
 fn face_error(e: &PolygonError, corners: &[&str]) -> String {
     let c = |i: usize| {
         corners
@@ -544,18 +604,29 @@ impl Reader<'_> {
                     DVec3::new(f64::from(p.x), f64::from(p.y), f64::from(p.z))
                 })
                 .collect();
+            // A keyhole face (a ring with a hole, joined by a bridge edge
+            // walked once each way) is its outline and holes.
+            let rings = keyhole_rings(&v, &pts);
+            let at = |ring: &[usize]| ring.iter().map(|&k| pts[k]).collect::<Vec<DVec3>>();
+            let outline = at(&rings[0]);
+            let holes: Vec<Vec<DVec3>> = rings[1..].iter().map(|r| at(r)).collect();
+            let flat: Vec<usize> = rings.iter().flatten().copied().collect();
             let tri = polygon::triangulate(
-                &pts,
-                &[],
+                &outline,
+                &holes,
                 PolygonOptions {
                     check_planarity: false,
                 },
             )
-            .map_err(|e| self.err(line, face_error(&e, args)))?;
-            // The CDT triangles wind around the face's Newell normal,
+            .map_err(|e| {
+                // The triangulator names points of the rings, in ring order.
+                let named: Vec<&str> = flat.iter().map(|&k| args[k]).collect();
+                self.err(line, face_error(&e, &named))
+            })?;
+            // The CDT triangles wind around the outline's Newell normal,
             // which follows the face's own winding.
             for c in &tri.triangles {
-                push(&mut self.data, c.map(|i| i as usize));
+                push(&mut self.data, c.map(|i| flat[i as usize]));
             }
         }
         self.corners = corners;

@@ -502,8 +502,10 @@ impl Quantisation {
 /// The colour difference beyond both sides' storage rounding, the largest
 /// channel's: 0 where both values store as the same code of the coarser
 /// side's format (decided on the codes, so that no f32 rounding of an
-/// interval end counts a boundary value as over), else the gap between
-/// the intervals of values the two stored codes stand for.
+/// interval end counts a boundary value as over); two images of one
+/// format whose codes differ differ by their decoded values (one code is
+/// a change); otherwise (an exact value against a code, or two formats)
+/// the gap between the intervals of values the two stand for.
 fn quantised_error(p: Rgb, q: Rgb, quant: [Quantisation; 2]) -> f32 {
     let common = match quant {
         [Quantisation::Exact, q] | [q, Quantisation::Exact] => Some(q),
@@ -515,8 +517,12 @@ fn quantised_error(p: Rgb, q: Rgb, quant: [Quantisation; 2]) -> f32 {
         .zip(q.to_array())
         .map(|(&x, y)| {
             match common {
-                Some(Quantisation::Exact) => return (x.clamp(0.0, 1.0) - y.clamp(0.0, 1.0)).abs(),
+                // Two float images: the stored values, unclamped (HDR).
+                Some(Quantisation::Exact) => return (x - y).abs(),
                 Some(c) if c.code(x) == c.code(y) => return 0.0,
+                // Two images of one format with different codes: a change
+                // of at least one code, whatever their intervals.
+                Some(c) if quant == [c, c] => return (x - y).abs(),
                 _ => {}
             }
             let (xl, xh) = quant[0].interval(x);
