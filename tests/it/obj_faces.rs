@@ -77,7 +77,9 @@ fn a_keyhole_face_loads_as_a_ring() {
         (got - want).abs() < 1e-5 * want,
         "area {got}, the ring's {want}"
     );
-    assert!(want > 0.5 && want < 3.0, "{want}");
+    // The hole is a real part of the face: without it the area would be
+    // the outer ring's.
+    assert!(area(inner) > 0.1 * area(&outer), "{want}");
     // Both backends see the same ring: the verdict passes with no real sample.
     let o = Command::new(env!("CARGO_BIN_EXE_rendiff"))
         .args(["diff", path.to_str().unwrap(), "--json"])
