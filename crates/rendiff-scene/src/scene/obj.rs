@@ -187,39 +187,49 @@ fn tokenize<'a>(content: &'a str, out: &mut Vec<&'a str>) {
 /// any cut that would leave a ring of fewer than three corners, stay as
 /// given (the triangulator then names the spike).
 fn keyhole_rings(v: &[u32], pts: &[DVec3]) -> Vec<Vec<usize>> {
-    let mut rings = vec![(0..v.len()).collect::<Vec<usize>>()];
-    'cut: loop {
-        for r in 0..rings.len() {
-            let ring = &rings[r];
-            let n = ring.len();
-            let at = |k: usize| v[ring[k % n]];
-            for i in 0..n {
-                let (a, b) = (at(i), at(i + 1));
-                if a == b {
-                    continue;
-                }
-                for j in i + 1..n {
-                    if at(j) == b && at(j + 1) == a {
-                        // ring[i+1 .. j] (from b round to before the second
-                        // b) and ring[j+1 ..] + ring[.. i] (from a round to
-                        // before the first a).
-                        let inner: Vec<usize> = ring[i + 1..j].to_vec();
-                        let outer: Vec<usize> = ring[(j + 1).min(n)..]
-                            .iter()
-                            .chain(&ring[..i])
-                            .copied()
-                            .collect();
-                        if inner.len() < 3 || outer.len() < 3 {
-                            continue;
-                        }
-                        rings.splice(r..=r, [outer, inner]);
-                        continue 'cut;
-                    }
-                }
-            }
+    // Each ring is searched once with a table of its directed edges (linear
+    // in its corners); a face with more bridges than this is left as given
+    // (a hostile face must not make the search quadratic).
+    const MAX_CUTS: usize = 256;
+    let bridge = |ring: &[usize]| -> Option<(usize, usize)> {
+        let n = ring.len();
+        let at = |k: usize| v[ring[k % n]];
+        let mut starts: std::collections::HashMap<(u32, u32), usize> =
+            std::collections::HashMap::with_capacity(n);
+        for k in 0..n {
+            starts.entry((at(k), at(k + 1))).or_insert(k);
         }
-        break;
+        (0..n).find_map(|i| {
+            let (a, b) = (at(i), at(i + 1));
+            let j = *starts.get(&(b, a))?;
+            // Both rings keep at least three corners.
+            (a != b && j > i && j - i > 3 && n - (j - i) > 3).then_some((i, j))
+        })
+    };
+    let mut done = Vec::new();
+    let mut todo = vec![(0..v.len()).collect::<Vec<usize>>()];
+    let mut cuts = 0;
+    while let Some(ring) = todo.pop() {
+        match bridge(&ring).filter(|_| cuts < MAX_CUTS) {
+            Some((i, j)) => {
+                // ring[i+1 .. j] (from b round to before the second b) and
+                // ring[j+1 ..] + ring[.. i] (from a round to before the
+                // first a).
+                cuts += 1;
+                let n = ring.len();
+                let inner: Vec<usize> = ring[i + 1..j].to_vec();
+                let outer: Vec<usize> = ring[(j + 1).min(n)..]
+                    .iter()
+                    .chain(&ring[..i])
+                    .copied()
+                    .collect();
+                todo.push(outer);
+                todo.push(inner);
+            }
+            None => done.push(ring),
+        }
     }
+    let mut rings = done;
     if rings.len() > 1 {
         let area = |ring: &[usize]| {
             let mut s = DVec3::ZERO;
