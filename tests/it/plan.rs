@@ -366,3 +366,52 @@ fn culling_removes_what_primary_visibility_cannot_see() {
         .expect("the camera is inside a closed object");
     assert!(!inside.plan.backface_cull[room]);
 }
+
+/// The seed's ray-count formula (p. 17) bounds what the ray tracer casts,
+/// level by level, and `plan --count` sets the two side by side.
+#[test]
+fn rays_cast_stay_within_the_seeds_ray_tree_bound() {
+    for name in ["glass", "menagerie", "spheres"] {
+        let job = crate::util::load(name, &rendiff::Overrides::default());
+        let rendered = job.render(rendiff::Backend::Ray).unwrap();
+        let rendiff::Work::Ray { rays, .. } = rendered.work else {
+            panic!("the ray tracer reports rays");
+        };
+        let cam = &job.tri.camera;
+        let n = u64::from(cam.sample_width()) * u64::from(cam.sample_height());
+        let depth = job.settings.max_depth;
+        let m = job.tri.lights.len() as u64;
+        assert_eq!(rays.primary, n);
+        assert_eq!(
+            rays.secondary,
+            rays.by_level.iter().sum::<u64>() + rays.straight,
+            "{name}: every secondary ray is on a level or straight"
+        );
+        for (k, &got) in rays.by_level.iter().enumerate() {
+            let level = k as u32 + 2;
+            if level > depth {
+                assert_eq!(got, 0, "{name}: level {level} beyond max_depth {depth}");
+            } else {
+                assert!(got <= n << (level - 1), "{name}: level {level}: {got}");
+            }
+        }
+        if rays.straight == 0 {
+            assert!(
+                rays.shadow <= n * m * ((1 << depth) - 1),
+                "{name}: {}",
+                rays.shadow
+            );
+        }
+    }
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_rendiff"))
+        .args(["plan", "scenes/glass.toml", "--count"])
+        .current_dir(crate::util::root())
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success());
+    assert!(
+        text.contains("ray tree") && text.contains("N·(2ⁿ − 1)") && text.contains("level 6"),
+        "{text}"
+    );
+}

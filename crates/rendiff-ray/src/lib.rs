@@ -55,7 +55,18 @@ pub struct RayStats {
     pub shadow: u64,
     /// Reflected, refracted and straight-through rays.
     pub secondary: u64,
+    /// Reflected and refracted rays by trace level: `by_level[k]` counts
+    /// the rays of level `k + 2` (level 1 is the primary rays; the last
+    /// entry also holds every deeper level). The seed's ray tree allows
+    /// at most `N·2^(k−1)` rays at level `k`.
+    pub by_level: [u64; LEVELS],
+    /// Straight continuations through `ior = 1` surfaces (they keep their
+    /// level, POV-Ray's rule, so they are outside the binary ray tree).
+    pub straight: u64,
 }
+
+/// Trace levels counted apiece in [`RayStats::by_level`].
+pub const LEVELS: usize = 32;
 
 impl std::ops::Add for RayStats {
     type Output = RayStats;
@@ -64,6 +75,8 @@ impl std::ops::Add for RayStats {
             primary: self.primary + o.primary,
             shadow: self.shadow + o.shadow,
             secondary: self.secondary + o.secondary,
+            by_level: std::array::from_fn(|k| self.by_level[k] + o.by_level[k]),
+            straight: self.straight + o.straight,
         }
     }
 }
@@ -104,6 +117,16 @@ impl Depth {
 struct Worker<'a, 's> {
     vis: ShadowRays<'a, 's>,
     secondary: u64,
+    by_level: [u64; LEVELS],
+    straight: u64,
+}
+
+impl Worker<'_, '_> {
+    /// Counts a reflected or refracted ray of `depth`'s level.
+    fn count_level(&mut self, depth: Depth) {
+        let k = (depth.level as usize).saturating_sub(2).min(LEVELS - 1);
+        self.by_level[k] += 1;
+    }
 }
 
 struct Tracer<'a, 's> {
@@ -160,6 +183,8 @@ pub fn render_counted(accel: &Accel<'_>, opts: &RayOptions) -> (Frame, RayStats)
             let mut w = Worker {
                 vis: ShadowRays::new(accel),
                 secondary: 0,
+                by_level: [0; LEVELS],
+                straight: 0,
             };
             let mut primary = 0u64;
             for tx in (0..sw).step_by(TILE as usize) {
@@ -174,6 +199,8 @@ pub fn render_counted(accel: &Accel<'_>, opts: &RayOptions) -> (Frame, RayStats)
                 primary,
                 shadow: w.vis.cast(),
                 secondary: w.secondary,
+                by_level: w.by_level,
+                straight: w.straight,
             }
         })
         .into_iter()
@@ -258,6 +285,7 @@ impl Tracer<'_, '_> {
                 // and the trace level is not used up.
                 if depth.straight < MAX_STRAIGHT {
                     let ray = Self::spawn(sp, d);
+                    w.straight += 1;
                     c += shaded.transmit * self.trace(w, &ray, depth.straight_on(), inside);
                 }
             } else {
@@ -287,6 +315,7 @@ impl Tracer<'_, '_> {
                             child_inside.push(obj);
                         }
                         let ray = Self::spawn(sp, t);
+                        w.count_level(depth.deeper());
                         c += shaded.transmit
                             * self.trace(w, &ray, depth.deeper(), &mut child_inside);
                     }
@@ -296,6 +325,7 @@ impl Tracer<'_, '_> {
                         total_internal = true;
                         let dir = shade::reflect_bumped(d, shaded.normal, shaded.raw_normal);
                         let ray = Self::spawn(sp, dir);
+                        w.count_level(depth.deeper());
                         c += self.trace(w, &ray, depth.deeper(), inside);
                     }
                 }
@@ -304,6 +334,7 @@ impl Tracer<'_, '_> {
         if shaded.reflection > 0.0 && !total_internal {
             let dir = shade::reflect_bumped(d, shaded.normal, shaded.raw_normal);
             let ray = Self::spawn(sp, dir);
+            w.count_level(depth.deeper());
             c += self.trace(w, &ray, depth.deeper(), inside) * shaded.reflection;
         }
         c
@@ -380,6 +411,12 @@ mod tests {
                 16 * u64::from(max_depth - 1),
                 "max_depth {max_depth}"
             );
+            // One ray per level: the one branch of each sample's tree.
+            for (k, &n) in stats.by_level.iter().enumerate() {
+                let level = u32::try_from(k).unwrap() + 2;
+                assert_eq!(n, if level <= max_depth { 16 } else { 0 }, "level {level}");
+            }
+            assert_eq!(stats.straight, 0);
             assert!(frame.id.iter().all(|&id| id != BACKGROUND));
         }
     }
@@ -397,6 +434,9 @@ mod tests {
             scene.materials[0].ior = 1.0;
             let (_, stats) = render(&scene, 2);
             assert_eq!(stats.secondary, 16 * per_sample, "{n} sheets");
+            // All of them straight: no level is used up.
+            assert_eq!(stats.straight, 16 * per_sample);
+            assert!(stats.by_level.iter().all(|&n| n == 0));
             // With max_depth 1 there is no ray tree at all.
             let (_, flat) = render(&scene, 1);
             assert_eq!(flat.secondary, 0);

@@ -422,6 +422,10 @@ pub struct PlanArgs {
     /// GiB (default 4), before allocating it.
     #[arg(long, value_name = "GIB")]
     pub memory_budget: Option<f64>,
+    /// Also render with the ray tracer and set the rays it cast, level by
+    /// level, beside the seed's bound N·[(2ⁿ − 1) + m(2ⁿ − 1)].
+    #[arg(long)]
+    pub count: bool,
 }
 
 fn parse_size(s: &str) -> Result<(u32, u32), String> {

@@ -1058,7 +1058,66 @@ fn plan(a: &PlanArgs) -> Result<Outcome> {
     let job = Prepared::load(&a.scene, &ov)?;
     warn_job(&job);
     say(&describe(&job))?;
+    if a.count {
+        let rendered = job.render(Backend::Ray)?;
+        if let rendiff::Work::Ray { rays, .. } = rendered.work {
+            say(&ray_count(&job, &rays))?;
+        }
+    }
     Ok(Outcome::Ok)
+}
+
+/// The seed's ray-count formula (p. 17) beside what a render cast: with N
+/// samples, a ray tree of depth n (`max_depth`) and m lights, at most
+/// N·(2ⁿ − 1) tree rays (2^(k−1) per sample at level k: one reflected and
+/// one refracted child per node) and N·m·(2ⁿ − 1) shadow rays.
+fn ray_count(job: &Prepared, r: &rendiff::ray::RayStats) -> String {
+    let cam = &job.tri.camera;
+    let n_samples = u64::from(cam.sample_width()) * u64::from(cam.sample_height());
+    let depth = job.settings.max_depth.min(63);
+    let m = job.tri.lights.len() as u64;
+    let nodes = (1u64 << depth) - 1;
+    let sat = |a: u64, b: u64| a.saturating_mul(b);
+    let mut o = String::new();
+    let _ = writeln!(
+        o,
+        "ray count (seed p. 17): N = {n_samples} samples, n = {depth} (max_depth), m = {m} lights"
+    );
+    let _ = writeln!(
+        o,
+        "  level 1 (primary)  {:>12} of at most {:>14}",
+        r.primary, n_samples
+    );
+    for k in 2..=depth.min(u32::try_from(rendiff::ray::LEVELS).unwrap_or(u32::MAX) + 1) {
+        let got = r.by_level[(k - 2) as usize];
+        let _ = writeln!(
+            o,
+            "  level {k:<12} {got:>12} of at most {:>14}",
+            sat(n_samples, 1u64 << (k - 1))
+        );
+    }
+    let tree = r.primary + r.by_level.iter().sum::<u64>();
+    let _ = writeln!(
+        o,
+        "  ray tree           {tree:>12} of at most {:>14} = N·(2ⁿ − 1)",
+        sat(n_samples, nodes)
+    );
+    let _ = writeln!(
+        o,
+        "  shadow rays        {:>12} of at most {:>14} = N·m·(2ⁿ − 1)",
+        r.shadow,
+        sat(sat(n_samples, m), nodes)
+    );
+    let _ = writeln!(
+        o,
+        "  straight through   {:>12} (ior = 1 surfaces keep their level: outside the tree)",
+        r.straight
+    );
+    let _ = writeln!(
+        o,
+        "  the gap: rays that leave the scene end their branch, only reflecting or refracting surfaces spawn children, total internal reflection spawns one, and the plan skips shadow rays no light needs"
+    );
+    o
 }
 
 /// What a scene contains and what the plan decides.
