@@ -282,16 +282,8 @@ pub fn write_png_u32(
     height: u32,
     words: &[u32],
 ) -> Result<(), ImageIoError> {
-    let mut out = Vec::new();
-    {
-        let mut enc = png::Encoder::new(&mut out, width, height);
-        enc.set_color(png::ColorType::Rgba);
-        enc.set_depth(png::BitDepth::Eight);
-        let data: Vec<u8> = words.iter().flat_map(|w| w.to_le_bytes()).collect();
-        let mut w = enc.write_header().map_err(|e| png_err(path, e))?;
-        w.write_image_data(&data).map_err(|e| png_err(path, e))?;
-    }
-    write_atomic(path, |w| w.write_all(&out))
+    let data: Vec<u8> = words.iter().flat_map(|w| w.to_le_bytes()).collect();
+    write_png_rgba8(path, width, height, &data)
 }
 
 /// Writes RGBA8 pixels.

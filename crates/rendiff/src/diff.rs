@@ -505,13 +505,7 @@ fn diff_outputs(
         &image_tol,
         tol.shading_max,
     );
-    let mut notes = Vec::new();
-    if let Some(f) = fuzzy {
-        notes.push(format!(
-            "the user's fuzzy rule decides: at most {} pixels may differ beyond the images' rounding, by at most {} codes (the derived rule allows none)",
-            f.pixels, f.max_diff
-        ));
-    }
+    let notes: Vec<String> = fuzzy.map(fuzzy_note).into_iter().collect();
     let mut report = Report::new(
         "two images",
         (width, height),
@@ -523,12 +517,12 @@ fn diff_outputs(
         Times { a: None, b: None },
         notes,
     );
-    let over: Vec<bool> = comparison
-        .errors
-        .iter()
-        .map(|&e| f64::from(e) > tol.shading_max)
-        .collect();
-    report.clusters = clusters::of_image_mask(width, height, &over, None);
+    report.clusters = clusters::of_image_mask(
+        width,
+        height,
+        &over_mask(&comparison, tol.shading_max),
+        None,
+    );
     DiffResult {
         report,
         comparison,
@@ -659,10 +653,7 @@ pub fn diff_with(
         }
     };
     if let (Some(f), Some(_)) = (image_tol.fuzzy, &image_tol_used) {
-        notes.push(format!(
-            "the user's fuzzy rule decides: at most {} pixels may differ beyond the images' rounding, by at most {} codes (the derived rule allows none)",
-            f.pixels, f.max_diff
-        ));
+        notes.push(fuzzy_note(f));
     }
     let mut report = Report::new(
         scene_label,
@@ -777,15 +768,29 @@ fn clusters_for(
             } else {
                 // The same frame (or the user's rule): the pixels over the
                 // bound beyond the images' rounding.
-                let over: Vec<bool> = comparison
-                    .errors
-                    .iter()
-                    .map(|&e| f64::from(e) > tol.shading_max)
-                    .collect();
+                let over = over_mask(comparison, tol.shading_max);
                 clusters::of_image_mask(cam.width(), cam.height(), &over, frame)
             }
         }
     }
+}
+
+/// The note a user's fuzzy rule adds to a verdict.
+fn fuzzy_note(f: compare::Fuzzy) -> String {
+    format!(
+        "the user's fuzzy rule decides: at most {} pixels may differ beyond the images' rounding, by at most {} codes (the derived rule allows none)",
+        f.pixels, f.max_diff
+    )
+}
+
+/// The pixels of an image comparison over the shading bound (beyond the
+/// images' rounding).
+fn over_mask(comparison: &Comparison, shading_max: f64) -> Vec<bool> {
+    comparison
+        .errors
+        .iter()
+        .map(|&e| f64::from(e) > shading_max)
+        .collect()
 }
 
 fn picture(out: &Output, w: u32, h: u32) -> Picture {
@@ -833,10 +838,7 @@ pub fn write_outputs(
     ];
     // The perceptual error map (FLIP's magma colours: black = no visible
     // difference, white = the largest).
-    if let Ok((map, _)) =
-        compare::flip::flip(r.b.pixels(), r.a.pixels(), w, h, compare::flip::DEFAULT_PPD)
-        && let Some(p) = compare::flip::magma_picture(w, h, &map)
-    {
+    if let Some(p) = compare::flip::magma_picture(w, h, &r.comparison.flip) {
         image_io::write_png_rgba8(&dir.join("flip.png"), w, h, &p.rgba)?;
     }
     if r.comparison.visibility.is_some() {

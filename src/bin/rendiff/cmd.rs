@@ -656,15 +656,8 @@ fn diff(a: &DiffArgs) -> Result<Outcome> {
             bail!("{flag}: two images are compared as they are; {flag} applies to scenes");
         }
     }
-    let is_png = |p: &PathBuf| {
-        p.extension().is_some_and(|e| {
-            ["png", "pfm", "exr"]
-                .iter()
-                .any(|x| e.eq_ignore_ascii_case(x))
-        })
-    };
-    if a.scenes.iter().any(is_png) {
-        return diff_two_images(a, a.scenes.iter().all(is_png));
+    if a.scenes.iter().any(image_ext) {
+        return diff_two_images(a, a.scenes.iter().all(image_ext));
     }
     let ov = overrides(&a.flags)?;
     let (side_a, side_b) = diff_sides(a, &ov)?;

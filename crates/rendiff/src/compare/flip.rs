@@ -943,16 +943,4 @@ mod tests {
             .collect();
         assert_eq!(ours.rgba, theirs);
     }
-
-    /// `cargo test -p rendiff flip_timing -- --ignored --nocapture`.
-    #[test]
-    #[ignore = "a timing, not a check"]
-    fn flip_timing_640x480() {
-        let (w, h) = (640u32, 480u32);
-        let a = scene(w, h);
-        let b: Vec<Rgb> = a.iter().map(|c| *c * 0.9).collect();
-        let t = std::time::Instant::now();
-        let (_, s) = flip(&a, &b, w, h, DEFAULT_PPD).expect("sizes");
-        eprintln!("640×480 LDR-FLIP: {:?} (mean {})", t.elapsed(), s.mean);
-    }
 }

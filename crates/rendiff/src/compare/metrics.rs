@@ -17,9 +17,11 @@ pub struct ImageStats {
     pub flip: super::flip::FlipStats,
 }
 
-/// Compares two images of the same size (linear colours, clamped to [0, 1]).
+/// Compares two images of the same size (linear colours, clamped to [0, 1]);
+/// also returns the FLIP map (empty if FLIP refused the input), computed
+/// once for the statistics and the `flip.png` picture.
 #[must_use]
-pub(crate) fn image_stats(w: u32, h: u32, a: &[Rgb], b: &[Rgb]) -> ImageStats {
+pub(crate) fn image_stats(w: u32, h: u32, a: &[Rgb], b: &[Rgb]) -> (ImageStats, Vec<f32>) {
     let mut max = 0u8;
     let mut differing = 0u64;
     for (p, q) in a.iter().zip(b) {
@@ -35,14 +37,17 @@ pub(crate) fn image_stats(w: u32, h: u32, a: &[Rgb], b: &[Rgb]) -> ImageStats {
             differing += 1;
         }
     }
-    ImageStats {
-        max_channel_8bit: max,
-        differing_pixels: differing,
-        ssim: ssim(w, h, a, b),
-        flip: super::flip::flip(b, a, w, h, super::flip::DEFAULT_PPD)
-            .map(|(_, s)| s)
-            .unwrap_or_default(),
-    }
+    let (flip_map, flip) =
+        super::flip::flip(b, a, w, h, super::flip::DEFAULT_PPD).unwrap_or_default();
+    (
+        ImageStats {
+            max_channel_8bit: max,
+            differing_pixels: differing,
+            ssim: ssim(w, h, a, b),
+            flip,
+        },
+        flip_map,
+    )
 }
 
 fn srgb8(c: Rgb) -> [u8; 3] {
@@ -154,7 +159,7 @@ mod tests {
     #[test]
     fn identical_images_are_perfect() {
         let a: Vec<Rgb> = (0..64).map(|i| Rgb::splat(i as f32 / 64.0)).collect();
-        let s = image_stats(8, 8, &a, &a);
+        let (s, _) = image_stats(8, 8, &a, &a);
         assert_eq!(s.max_channel_8bit, 0);
         assert_eq!(s.differing_pixels, 0);
         assert!((s.ssim - 1.0).abs() < 1e-12);
@@ -167,7 +172,7 @@ mod tests {
         let a = vec![Rgb::splat(0.5); 100];
         let mut b = a.clone();
         b[42] = Rgb::new(0.5, 0.6, 0.5);
-        let s = image_stats(10, 10, &a, &b);
+        let (s, _) = image_stats(10, 10, &a, &b);
         assert_eq!(s.differing_pixels, 1);
         assert!(s.max_channel_8bit > 0);
         assert!(s.ssim < 1.0);

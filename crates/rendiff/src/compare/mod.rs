@@ -231,6 +231,8 @@ pub struct Comparison {
     pub judged: Option<JudgedTolerances>,
     /// Passed.
     pub pass: bool,
+    /// The FLIP error per pixel (a's against b's colours), or empty.
+    pub flip: Vec<f32>,
 }
 
 /// One sample's class, shading error, shading tie and (where the frames
@@ -337,7 +339,7 @@ pub fn compare_frames(
     }
     let shading = shading_stats(a, b, &classes, &errors, &ties, tol);
     let over = shading.over_threshold;
-    let image = metrics::image_stats(a.width, a.height, &a.color, &b.color);
+    let (image, flip) = metrics::image_stats(a.width, a.height, &a.color, &b.color);
     let pass = vis.real == 0 && vis.unjudgeable == 0 && over == 0;
     let judged = JudgedTolerances {
         judged: edges.len() as u64,
@@ -346,6 +348,7 @@ pub fn compare_frames(
         near_eps: Spread::of(nears, 0.0),
     };
     Comparison {
+        flip,
         visibility: Some(vis),
         shading,
         image,
@@ -583,7 +586,7 @@ pub(crate) fn compare_images(
     #[expect(clippy::cast_precision_loss, reason = "pixel counts below 2^52")]
     let n = a.len().max(1) as f64;
     let rmse = (sq / (3.0 * n)).sqrt();
-    let image = metrics::image_stats(w, h, a, b);
+    let (image, flip) = metrics::image_stats(w, h, a, b);
     let pass = match (tol.fuzzy, tol.rule) {
         (Some(f), _) => over <= f.pixels && over_max8 <= f.max_diff,
         (None, ImageRule::SameFrame) => over == 0,
@@ -600,6 +603,7 @@ pub(crate) fn compare_images(
         }
     };
     Comparison {
+        flip,
         visibility: None,
         shading: ShadingStats {
             max,

@@ -297,13 +297,7 @@ fn write_header(
             "// and average {n}x{n} blocks (the n×n samples of each pixel, each clamped to [0, 1] first, as the PNG stores them)."
         );
     }
-    let _ = writeln!(
-        o,
-        "global_settings {{ assumed_gamma 1.0 ambient_light rgb {} max_trace_level {} adc_bailout 0 }}",
-        rgb(tri.ambient_light),
-        opts.max_depth
-    );
-    let _ = writeln!(o, "background {{ rgb {} }}", rgb(tri.background));
+    write_settings(o, tri, opts);
 }
 
 /// As [`write_header`], for a file written at `pov`: the first comment
@@ -353,6 +347,11 @@ fn write_header_for(
             "// Then average {n}x{n} blocks (the n×n samples of each pixel, each clamped to [0, 1] first, as the PNG stores them)."
         );
     }
+    write_settings(o, tri, opts);
+}
+
+/// The global settings and background every export starts with.
+fn write_settings(o: &mut String, tri: &TriScene, opts: &ExportOptions) {
     let _ = writeln!(
         o,
         "global_settings {{ assumed_gamma 1.0 ambient_light rgb {} max_trace_level {} adc_bailout 0 }}",
