@@ -383,3 +383,40 @@ fn red_team_findings_stay_fixed() {
     assert_eq!(code, 0, "{text}");
     assert!(!g.join("z.ray.new.png").exists());
 }
+
+#[test]
+fn out_makes_the_folders_of_the_path_it_is_given() {
+    // The README's first command writes `--out out/spheres` on a fresh
+    // checkout, where `out/` does not exist yet.
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let s = scene_path("spheres");
+    let (code, text) = rendiff(
+        &[
+            "diff",
+            s.to_str().unwrap(),
+            "--size",
+            "32x24",
+            "--out",
+            "out/a/spheres",
+        ],
+        d,
+    );
+    assert_eq!(code, 0, "{text}");
+    assert!(d.join("out/a/spheres/index.html").is_file(), "{text}");
+    // A file in the way is refused by name, and nothing is made.
+    std::fs::write(d.join("blocker"), "x").unwrap();
+    let (code, text) = rendiff(
+        &[
+            "diff",
+            s.to_str().unwrap(),
+            "--size",
+            "32x24",
+            "--out",
+            "blocker/x/y",
+        ],
+        d,
+    );
+    assert_eq!(code, 2, "{text}");
+    assert!(text.contains("blocker is a file"), "{text}");
+}

@@ -124,11 +124,17 @@ impl OutputDir {
             .parent()
             .filter(|p| !p.as_os_str().is_empty())
             .unwrap_or(Path::new("."));
+        // The folders of the path the user named are made as `mkdir -p`
+        // would (a fresh checkout has no `out/`); a file in their way is
+        // refused by name.
         if !parent.is_dir() {
-            return Err(refused(
-                target,
-                format!("the folder {} does not exist", parent.display()),
-            ));
+            if let Some(file) = parent.ancestors().find(|p| p.is_file()) {
+                return Err(refused(
+                    target,
+                    format!("{} is a file, not a folder", file.display()),
+                ));
+            }
+            std::fs::create_dir_all(parent).map_err(|e| io(parent, e))?;
         }
         let name = target
             .file_name()
