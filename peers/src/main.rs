@@ -28,10 +28,11 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use rayon::prelude::*;
-use rendiff::accel::{Accel, AccelOptions};
+use rendiff::accel::{Accel, AccelOptions, ShadowRays};
 use rendiff::color::to_srgb8;
 use rendiff::math::{Ray64, to_f32};
 use rendiff::pov::golden::{self, Variant};
+use rendiff::shade::Visibility;
 use rendiff::{Backend, Overrides, Prepared};
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -90,7 +91,7 @@ fn main() -> Result<()> {
                 .cloned()
                 .unwrap_or_else(|| PathBuf::from("benches/scenes/bunny_1m.toml"));
             let k: u32 = flag(rest, "--subdivide").map_or(Ok(4), |s| s.parse())?;
-            embree_cmp(&scene, k, repeats)
+            embree_cmp(&scene, k, repeats).map(|_| ())
         }
         "povray" => {
             let mut scenes = positional(rest);
@@ -113,16 +114,74 @@ fn main() -> Result<()> {
     }
 }
 
-fn embree_cmp(scene: &Path, subdivide: u32, repeats: usize) -> Result<()> {
+/// Times `f` `repeats` times on a pool of `threads`; the median in ms.
+fn time_ms(p: &rayon::ThreadPool, repeats: usize, f: &(dyn Fn() + Sync)) -> f64 {
+    median(
+        (0..repeats)
+            .map(|_| {
+                p.install(|| {
+                    let t = Instant::now();
+                    f();
+                    t.elapsed().as_secs_f64() * 1e3
+                })
+            })
+            .collect(),
+    )
+}
+
+/// The figures of one `embree` comparison (1 thread), for the summary.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RayFigures {
+    /// Primary rays, ours single rays / Embree `rtcIntersect1` (speed ratio, >1: ours faster).
+    pub primary: f64,
+    /// 4×2 blocks, our single rays in block order / Embree `rtcIntersect8`.
+    pub coherent: f64,
+    /// Our shadow rays, M rays/s.
+    pub shadow_mrays: f64,
+    /// Our shadow rays / Embree `rtcOccluded1`.
+    pub shadow_vs_embree: f64,
+    /// Build time, ours / Embree.
+    pub build: f64,
+}
+
+#[expect(clippy::cast_possible_truncation, reason = "Embree takes f32 rays")]
+fn embree_ray(r: &Ray64) -> embree::EmbreeRay {
+    (
+        to_f32(r.origin).to_array(),
+        to_f32(r.dir).to_array(),
+        r.t_min as f32,
+        r.t_max as f32,
+    )
+}
+
+/// The camera's primary rays in scanline order, and the same rays in
+/// 4×2 blocks (row-major within each block), as the ray tracer casts them.
+fn camera_rays(cam: &rendiff::camera::Camera) -> (Vec<Ray64>, Vec<Vec<Ray64>>) {
+    let (w, h) = (cam.sample_width(), cam.sample_height());
+    let rays: Vec<Ray64> = (0..h)
+        .flat_map(|sy| (0..w).map(move |sx| (sx, sy)))
+        .map(|(sx, sy)| cam.sample_ray64(sx, sy))
+        .collect();
+    let mut blocks = Vec::new();
+    for by in (0..h).step_by(2) {
+        for bx in (0..w).step_by(4) {
+            let b: Vec<Ray64> = (by..(by + 2).min(h))
+                .flat_map(|y| (bx..(bx + 4).min(w)).map(move |x| (x, y)))
+                .map(|(x, y)| cam.sample_ray64(x, y))
+                .collect();
+            blocks.push(b);
+        }
+    }
+    (rays, blocks)
+}
+
+fn embree_cmp(scene: &Path, subdivide: u32, repeats: usize) -> Result<RayFigures> {
     let job = Prepared::load(scene, &Overrides::default())?;
     let tri = job.tri.subdivided(subdivide);
     let cam = &tri.camera;
     // The camera's f64 rays: ours decides on them, Embree gets their f32
     // rounding (the same rays, as each takes them).
-    let rays: Vec<Ray64> = (0..cam.sample_height())
-        .flat_map(|sy| (0..cam.sample_width()).map(move |sx| (sx, sy)))
-        .map(|(sx, sy)| cam.sample_ray64(sx, sy))
-        .collect();
+    let (rays, blocks) = camera_rays(cam);
     println!(
         "{}: {} triangles, {}x{}, {} primary rays",
         scene.display(),
@@ -133,92 +192,179 @@ fn embree_cmp(scene: &Path, subdivide: u32, repeats: usize) -> Result<()> {
     );
     let positions: Vec<[f32; 3]> = tri.positions.iter().map(|p| p.to_array()).collect();
     let all = all_threads();
-    for threads in [1, all] {
+    let mut figures = RayFigures::default();
+    let mut thread_counts = vec![1];
+    if all > 1 {
+        thread_counts.push(all);
+    }
+    for threads in thread_counts {
         let p = pool(threads)?;
-        // Builds.
-        let ours_build = median(
-            (0..repeats)
-                .map(|_| {
-                    p.install(|| {
-                        let t = Instant::now();
-                        let a = Accel::new(&tri, AccelOptions::default());
-                        std::hint::black_box(&a);
-                        t.elapsed().as_secs_f64() * 1e3
-                    })
-                })
-                .collect(),
-        );
         let config = format!("threads={threads}");
-        let embree_build = median(
-            (0..repeats)
-                .map(|_| {
-                    let t = Instant::now();
-                    let e = embree::EmbreeScene::new(&positions, &tri.tris, &config);
-                    std::hint::black_box(&e);
-                    t.elapsed().as_secs_f64() * 1e3
-                })
-                .collect(),
-        );
+        let ours_build = time_ms(&p, repeats, &|| {
+            std::hint::black_box(Accel::new(&tri, AccelOptions::default()));
+        });
+        let embree_build = time_ms(&p, repeats, &|| {
+            std::hint::black_box(embree::EmbreeScene::new(&positions, &tri.tris, &config).ok());
+        });
         let accel = Accel::new(&tri, AccelOptions::default());
         let emb = embree::EmbreeScene::new(&positions, &tri.tris, &config)?;
-        let time = |f: &(dyn Fn(&Ray64) -> Option<(u32, f32)> + Sync)| -> f64 {
-            median(
-                (0..repeats)
-                    .map(|_| {
-                        p.install(|| {
-                            let t = Instant::now();
-                            let hits: usize = rays
-                                .par_chunks(4096)
-                                .map(|c| c.iter().filter(|r| f(r).is_some()).count())
-                                .sum();
-                            std::hint::black_box(hits);
-                            t.elapsed().as_secs_f64() * 1e3
+        let count = |f: &(dyn Fn(&Ray64) -> bool + Sync)| {
+            let hits: usize = rays
+                .par_chunks(4096)
+                .map(|c| c.iter().filter(|r| f(r)).count())
+                .sum();
+            std::hint::black_box(hits);
+        };
+        let t_ours = time_ms(&p, repeats, &|| count(&|r| accel.intersect(r).is_some()));
+        let t_emb = time_ms(&p, repeats, &|| {
+            count(&|r| {
+                let (o, d, t0, t1) = embree_ray(r);
+                emb.intersect(o, d, t0, t1).is_some()
+            });
+        });
+        // Coherent: 4×2 blocks, Embree's rtcIntersect8 against our single
+        // rays in the same block order (our packet traversal was slower
+        // than single rays: see benches/README.md).
+        let t_packet = time_ms(&p, repeats, &|| {
+            let hits: usize = blocks
+                .par_chunks(512)
+                .map(|c| {
+                    c.iter()
+                        .map(|b| b.iter().filter(|r| accel.intersect(r).is_some()).count())
+                        .sum::<usize>()
+                })
+                .sum();
+            std::hint::black_box(hits);
+        });
+        let t_emb8 = time_ms(&p, repeats, &|| {
+            let hits: usize = blocks
+                .par_chunks(512)
+                .map(|c| {
+                    c.iter()
+                        .map(|b| {
+                            let r: Vec<embree::EmbreeRay> = b.iter().map(embree_ray).collect();
+                            emb.intersect8(&r).iter().filter(|h| h.is_some()).count()
                         })
-                    })
-                    .collect(),
-            )
-        };
-        let ours = |r: &Ray64| accel.intersect(r).map(|h| (h.prim, h.t));
-        #[expect(clippy::cast_possible_truncation, reason = "Embree takes f32 rays")]
-        let theirs = |r: &Ray64| {
-            emb.intersect(
-                to_f32(r.origin).to_array(),
-                to_f32(r.dir).to_array(),
-                r.t_min as f32,
-                r.t_max as f32,
-            )
-        };
-        let t_ours = time(&ours);
-        let t_emb = time(&theirs);
-        let mrays = |ms: f64| rays.len() as f64 / ms / 1e3;
+                        .sum::<usize>()
+                })
+                .sum();
+            std::hint::black_box(hits);
+        });
+        // Shadow rays: from every visible point to the light, as shading casts them.
+        let shadow = shadow_rays(&tri, &accel);
+        let vis = ShadowRays::new(&accel);
+        let t_shadow = time_ms(&p, repeats, &|| {
+            let n: usize = shadow
+                .par_chunks(4096)
+                .map(|c| c.iter().filter(|q| vis.transmittance(q).is_black()).count())
+                .sum();
+            std::hint::black_box(n);
+        });
+        let t_emb_shadow = time_ms(&p, repeats, &|| {
+            let n: usize = shadow
+                .par_chunks(4096)
+                .map(|c| {
+                    c.iter()
+                        .filter(|q| {
+                            emb.occluded(q.origin.to_array(), q.dir.to_array(), 0.0, q.t_max)
+                        })
+                        .count()
+                })
+                .sum();
+            std::hint::black_box(n);
+        });
+        let mrays = |n: usize, ms: f64| n as f64 / ms / 1e3;
         println!(
-            "{threads} thread(s): build ours {ours_build:.1} ms, Embree {embree_build:.1} ms ({:.2}x); primary rays ours {t_ours:.1} ms = {:.2} Mrays/s, Embree {t_emb:.1} ms = {:.2} Mrays/s; Embree is {:.2}x ours",
-            ours_build / embree_build,
-            mrays(t_ours),
-            mrays(t_emb),
-            t_ours / t_emb
+            "{threads} thread(s): build ours {ours_build:.1} ms, Embree {embree_build:.1} ms (ours/Embree {:.2}x)",
+            ours_build / embree_build
+        );
+        println!(
+            "  primary rays (scanline order): ours {t_ours:.1} ms = {:.2} Mrays/s, Embree rtcIntersect1 {t_emb:.1} ms = {:.2} Mrays/s; ours is {:.2}x Embree's speed",
+            mrays(rays.len(), t_ours),
+            mrays(rays.len(), t_emb),
+            t_emb / t_ours
+        );
+        println!(
+            "  coherent 4x2 blocks: ours (single rays, block order) {t_packet:.1} ms = {:.2} Mrays/s, Embree rtcIntersect8 {t_emb8:.1} ms = {:.2} Mrays/s; ours is {:.2}x Embree's speed",
+            mrays(rays.len(), t_packet),
+            mrays(rays.len(), t_emb8),
+            t_emb8 / t_packet
+        );
+        println!(
+            "  shadow rays ({} from the visible points): ours {t_shadow:.1} ms = {:.2} Mrays/s, Embree rtcOccluded1 {t_emb_shadow:.1} ms = {:.2} Mrays/s; ours is {:.2}x Embree's speed",
+            shadow.len(),
+            mrays(shadow.len(), t_shadow),
+            mrays(shadow.len(), t_emb_shadow),
+            t_emb_shadow / t_shadow
         );
         if threads == 1 {
-            let (mut same, mut both_miss, mut differ, mut close) = (0usize, 0usize, 0usize, 0usize);
-            for r in &rays {
-                match (ours(r), theirs(r)) {
-                    (None, None) => both_miss += 1,
-                    (Some(a), Some(b)) if a.0 == b.0 => same += 1,
-                    (Some(a), Some(b)) => {
-                        differ += 1;
-                        if (a.1 - b.1).abs() <= 1e-5 * a.1.max(b.1) {
-                            close += 1;
-                        }
-                    }
-                    _ => differ += 1,
-                }
-            }
-            println!(
-                "hits: {same} same triangle, {both_miss} both miss, {differ} differ ({close} of them at the same distance within 1e-5: shared edges and vertices)"
-            );
+            figures = RayFigures {
+                primary: t_emb / t_ours,
+                coherent: t_emb8 / t_packet,
+                shadow_mrays: mrays(shadow.len(), t_shadow),
+                shadow_vs_embree: t_emb_shadow / t_shadow,
+                build: ours_build / embree_build,
+            };
+            agreement(&rays, &accel, &emb);
         }
     }
-    Ok(())
+    Ok(figures)
+}
+
+/// The shadow queries of a frame: one from every visible point of the
+/// primary rays toward the scene's first light, started off the surface
+/// as shading starts them.
+fn shadow_rays(
+    tri: &rendiff::tri_scene::TriScene,
+    accel: &Accel<'_>,
+) -> Vec<rendiff::shade::ShadowQuery> {
+    let cam = &tri.camera;
+    let light = match tri.lights.first().map(|l| l.kind) {
+        Some(rendiff::shade::LightKind::Point { position }) => position,
+        _ => return Vec::new(),
+    };
+    (0..cam.sample_height())
+        .flat_map(|y| (0..cam.sample_width()).map(move |x| (x, y)))
+        .filter_map(|(x, y)| {
+            let h = accel.intersect(&cam.sample_ray64(x, y))?;
+            let sp = tri.surface_at(h.prim, rendiff::math::Bary(h.b));
+            let dir = (light - sp.p).normalize();
+            let o = rendiff::shade::offset_origin(sp.p, sp.p_error, sp.ng, dir);
+            let d = light - o;
+            Some(rendiff::shade::ShadowQuery {
+                light: 0,
+                origin: o,
+                dir: d.normalize(),
+                t_max: d.length(),
+                normal: d.normalize(),
+            })
+        })
+        .collect()
+}
+
+/// Ours against Embree, hit by hit.
+fn agreement(rays: &[Ray64], accel: &Accel<'_>, emb: &embree::EmbreeScene) {
+    let (mut same, mut both_miss, mut differ, mut close) = (0usize, 0usize, 0usize, 0usize);
+    for r in rays {
+        let (o, d, t0, t1) = embree_ray(r);
+        match (
+            accel.intersect(r).map(|h| (h.prim, h.t)),
+            emb.intersect(o, d, t0, t1),
+        ) {
+            (None, None) => both_miss += 1,
+            (Some(a), Some(b)) if a.0 == b.0 => same += 1,
+            (Some(a), Some(b)) => {
+                differ += 1;
+                if (a.1 - b.1).abs() <= 1e-5 * a.1.max(b.1) {
+                    close += 1;
+                }
+            }
+            _ => differ += 1,
+        }
+    }
+    println!(
+        "  hits against Embree: {same} same triangle, {both_miss} both miss, {differ} differ ({close} of them at the same distance within 1e-5: shared edges and vertices)"
+    );
 }
 
 /// POV-Ray's trace time in milliseconds from its statistics.

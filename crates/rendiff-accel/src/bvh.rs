@@ -15,7 +15,7 @@
 use glam::Vec4;
 
 use super::triangle::{RayPrecomp, TriHit, TriPack, candidates, f32_at_least, intersect};
-use rendiff_core::math::{Aabb, Ray64, Vec3, gamma, to_f64};
+use rendiff_core::math::{Aabb, DVec3, Ray64, Vec3, gamma, to_f64};
 
 /// Child slot encoding: the high bit marks a leaf.
 const LEAF: u32 = 1 << 31;
@@ -65,6 +65,9 @@ pub(crate) struct Bvh {
     /// Triangles.
     triangles: usize,
     bounds: Aabb,
+    /// The bounds' bounding sphere (centre in `f64`, radius with the
+    /// margin of [`Bvh::reach`]), computed once.
+    sphere: (DVec3, f64),
     depth: u32,
 }
 
@@ -415,6 +418,8 @@ impl Bvh {
             build_binary(&mut prims, 0, 0, b)
         };
         bvh.bounds = tree.bounds();
+        let (c, r) = bvh.bounds.bounding_sphere();
+        bvh.sphere = (to_f64(c), f64::from(r) * (1.0 + 1e-6));
         bvh.triangles = ids.len();
         let order: Vec<u32> = prims.iter().map(|p| ids[p.index() as usize]).collect();
         let leaves = Leaves {
@@ -554,8 +559,8 @@ impl Bvh {
     /// The farthest `t` at which `ray` can meet a triangle of the tree:
     /// the distance to the far side of the bounds' bounding sphere.
     fn reach(&self, ray: &Ray64) -> f64 {
-        let (c, r) = self.bounds.bounding_sphere();
-        (ray.origin - to_f64(c)).length() + f64::from(r) * (1.0 + 1e-6)
+        let (c, r) = self.sphere;
+        (ray.origin - c).length() + r
     }
 
     /// The closest hit with `t` in `[ray.t_min, ray.t_max]`; equal `t`
@@ -569,19 +574,7 @@ impl Bvh {
         let mut t_prune = pre.ray.t_max;
         self.traverse(&pre, &mut t_prune, true, |first, t_prune| {
             self.leaf_hits(&pre, first, t_min, &mut best_t, |id, h, best_t| {
-                let better = match best {
-                    None => true,
-                    Some(b) => h.t64 < b.t64 || (h.t64 == b.t64 && id < b.id),
-                };
-                if better {
-                    best = Some(BvhHit {
-                        t: h.t,
-                        t64: h.t64,
-                        id,
-                        b: h.b,
-                    });
-                    *best_t = h.t64;
-                }
+                offer(&mut best, best_t, id, h);
                 false
             });
             // Boxes are pruned in f32: never below the f64 distance.
@@ -648,7 +641,6 @@ impl Bvh {
         ordered: bool,
         mut leaf: impl FnMut(usize, &mut f32) -> bool,
     ) {
-        let ray = &pre.ray;
         if self.root == EMPTY {
             return;
         }
@@ -656,42 +648,8 @@ impl Bvh {
             leaf((self.root & !LEAF) as usize, t_max);
             return;
         }
-        // A zero direction component would give 0·∞ = NaN in the slab test:
-        // replace it by a tiny one (the box test stays conservative because
-        // t_far is enlarged and the triangle test uses the true direction).
-        let safe = |d: f32| {
-            if d.abs() < 1e-30 {
-                1e-30f32.copysign(d)
-            } else {
-                d
-            }
-        };
-        let inv = Vec3::new(
-            1.0 / safe(ray.dir.x),
-            1.0 / safe(ray.dir.y),
-            1.0 / safe(ray.dir.z),
-        );
-        // Boxes inflated by the drift between the f32 ray and the f64 ray
-        // it stands for (zero when they are the same ray): the lower
-        // planes are met from the origin moved up by it, the upper planes
-        // from the origin moved down, rounded outward.
-        let e = pre.inflate;
-        let shift = |o: f32, up: bool| {
-            if e == 0.0 {
-                o
-            } else if up {
-                (o + e).next_up()
-            } else {
-                (o - e).next_down()
-            }
-        };
-        let lo_o = |o: f32| Vec4::splat(shift(o, true));
-        let hi_o = |o: f32| Vec4::splat(shift(o, false));
-        let (ox0, oy0, oz0) = (lo_o(ray.origin.x), lo_o(ray.origin.y), lo_o(ray.origin.z));
-        let (ox1, oy1, oz1) = (hi_o(ray.origin.x), hi_o(ray.origin.y), hi_o(ray.origin.z));
-        let (ix, iy, iz) = (Vec4::splat(inv.x), Vec4::splat(inv.y), Vec4::splat(inv.z));
-        let grow = 1.0 + 2.0 * gamma(3);
-        let t_min4 = Vec4::splat(ray.t_min);
+        let slab = Slab::new(pre);
+        let grow = Slab::GROW;
         // The stack holds (t_near bits << 32 | child). A visit pops one
         // entry and pushes at most three (the nearest child is descended
         // into directly), so 3·depth + 1 entries suffice; the usual trees
@@ -714,18 +672,8 @@ impl Bvh {
                 }
             } else {
                 let n = &self.nodes[node as usize];
-                let tx0 = (n.min_x - ox0) * ix;
-                let tx1 = (n.max_x - ox1) * ix;
-                let ty0 = (n.min_y - oy0) * iy;
-                let ty1 = (n.max_y - oy1) * iy;
-                let tz0 = (n.min_z - oz0) * iz;
-                let tz1 = (n.max_z - oz1) * iz;
-                let tn = tx0.min(tx1).max(ty0.min(ty1)).max(tz0.min(tz1)).max(t_min4);
-                let tf = tx0.max(tx1).min(ty0.max(ty1)).min(tz0.max(tz1)) * grow;
-                let tf = tf.min(Vec4::splat(*t_max * grow));
-                let mut mask = tn.cmple(tf).bitmask() & n.used;
+                let (mut mask, tn) = slab.test(n, *t_max);
                 if mask != 0 {
-                    let tn = tn.to_array();
                     // The nearest hit child is descended into; the others
                     // are pushed far to near (ordered) or as they come.
                     let mut near = mask.trailing_zeros() as usize;
@@ -783,6 +731,104 @@ impl Bvh {
                 }
             }
         }
+    }
+}
+
+/// The closest-hit rule of every query: a hit replaces the best when it is
+/// nearer (in `f64`), or as near with a lower triangle id.
+#[inline]
+fn offer(best: &mut Option<BvhHit>, best_t: &mut f64, id: u32, h: TriHit) {
+    let better = match *best {
+        None => true,
+        Some(b) => h.t64 < b.t64 || (h.t64 == b.t64 && id < b.id),
+    };
+    if better {
+        *best = Some(BvhHit {
+            t: h.t,
+            t64: h.t64,
+            id,
+            b: h.b,
+        });
+        *best_t = h.t64;
+    }
+}
+
+/// One ray's constants of the slab test of a node's four boxes.
+///
+/// A zero direction component would give 0·∞ = NaN in the slab test: it
+/// is replaced by a tiny one (the box test stays conservative because
+/// `t_far` is enlarged and the triangle test uses the true direction).
+/// Boxes are inflated by the drift between the `f32` ray and the `f64` ray
+/// it stands for (zero when they are the same ray): the lower planes are
+/// met from the origin moved up by it, the upper planes from the origin
+/// moved down, rounded outward.
+#[derive(Clone, Copy, Debug)]
+struct Slab {
+    /// Origin against the lower planes, per axis, in four lanes.
+    lo: [Vec4; 3],
+    /// Origin against the upper planes.
+    hi: [Vec4; 3],
+    /// Inverse direction.
+    inv: [Vec4; 3],
+    t_min: Vec4,
+}
+
+impl Slab {
+    /// `t_far` (and `t_max`) are enlarged by this factor: the slab test's
+    /// rounding never culls a box the ray enters (Ize 2013, pbrt-v4).
+    const GROW: f32 = 1.0 + 2.0 * gamma(3);
+
+    #[inline]
+    fn new(pre: &RayPrecomp) -> Slab {
+        let ray = &pre.ray;
+        let safe = |d: f32| {
+            if d.abs() < 1e-30 {
+                1e-30f32.copysign(d)
+            } else {
+                d
+            }
+        };
+        let e = pre.inflate;
+        let shift = |o: f32, up: bool| {
+            if e == 0.0 {
+                o
+            } else if up {
+                (o + e).next_up()
+            } else {
+                (o - e).next_down()
+            }
+        };
+        let o = ray.origin.to_array();
+        let d = ray.dir.to_array();
+        Slab {
+            lo: o.map(|o| Vec4::splat(shift(o, true))),
+            hi: o.map(|o| Vec4::splat(shift(o, false))),
+            inv: d.map(|d| Vec4::splat(1.0 / safe(d))),
+            t_min: Vec4::splat(ray.t_min),
+        }
+    }
+
+    /// The children of `n` whose boxes the ray enters before `t_max` (a bit
+    /// mask), and the `t_near` of each lane.
+    #[inline]
+    fn test(&self, n: &Node4, t_max: f32) -> (u32, [f32; 4]) {
+        let [ox0, oy0, oz0] = self.lo;
+        let [ox1, oy1, oz1] = self.hi;
+        let [ix, iy, iz] = self.inv;
+        let tx0 = (n.min_x - ox0) * ix;
+        let tx1 = (n.max_x - ox1) * ix;
+        let ty0 = (n.min_y - oy0) * iy;
+        let ty1 = (n.max_y - oy1) * iy;
+        let tz0 = (n.min_z - oz0) * iz;
+        let tz1 = (n.max_z - oz1) * iz;
+        let tn = tx0
+            .min(tx1)
+            .max(ty0.min(ty1))
+            .max(tz0.min(tz1))
+            .max(self.t_min);
+        let tf = tx0.max(tx1).min(ty0.max(ty1)).min(tz0.max(tz1)) * Slab::GROW;
+        let tf = tf.min(Vec4::splat(t_max * Slab::GROW));
+        (tn.cmple(tf).bitmask() & n.used, tn.to_array())
     }
 }
 

@@ -141,7 +141,12 @@ impl<'s> Accel<'s> {
     /// `f64` ray (see [`Ray64`]).
     #[must_use]
     pub fn intersect(&self, ray: &Ray64) -> Option<Hit> {
-        let mut best = self.bvh.intersect(ray).map(|h| Hit {
+        self.with_analytic(ray, self.bvh.intersect(ray))
+    }
+
+    /// The closest of a BVH hit and the analytic shapes' hits on `ray`.
+    fn with_analytic(&self, ray: &Ray64, bvh_hit: Option<BvhHit>) -> Option<Hit> {
+        let mut best = bvh_hit.map(|h| Hit {
             t: h.t,
             prim: h.id,
             b: h.b,

@@ -367,18 +367,7 @@ impl Camera {
     /// (DESIGN.md §2: surfaces beyond either are not seen).
     #[must_use]
     pub fn primary_ray(&self, x: f64, y: f64) -> Ray {
-        let (o, d) = self.primary_ray_f64(x, y);
-        #[expect(
-            clippy::cast_possible_truncation,
-            reason = "the one rounding of the clip distances to f32"
-        )]
-        let (t_min, t_max) = (self.near_t(d) as f32, self.far_t(d) as f32);
-        Ray {
-            origin: to_f32(o),
-            dir: to_f32(d),
-            t_min,
-            t_max,
-        }
+        self.primary_ray64(x, y).to_f32()
     }
 
     /// The primary ray through screen point `(x, y)` as the ray tracer casts

@@ -14,7 +14,7 @@ pub const F32_EPS: f32 = f32::EPSILON * 0.5;
 /// Higham's γ(n) = nε/(1 − nε) for `f32`: a bound on the relative error of
 /// `n` chained floating-point operations (pbrt-v4 `gamma`).
 #[must_use]
-pub fn gamma(n: u32) -> f32 {
+pub const fn gamma(n: u32) -> f32 {
     #[expect(clippy::cast_precision_loss, reason = "n is a small operation count")]
     let ne = n as f32 * F32_EPS;
     ne / (1.0 - ne)
@@ -22,8 +22,8 @@ pub fn gamma(n: u32) -> f32 {
 
 /// `f64` version of [`gamma`].
 #[must_use]
-pub fn gamma64(n: u32) -> f64 {
-    let ne = f64::from(n) * (f64::EPSILON * 0.5);
+pub const fn gamma64(n: u32) -> f64 {
+    let ne = n as f64 * (f64::EPSILON * 0.5);
     ne / (1.0 - ne)
 }
 
@@ -85,6 +85,19 @@ impl From<&Ray> for Ray64 {
 }
 
 impl Ray64 {
+    /// The `f32` ray nearest to this one: each part rounded once (so the
+    /// `f32` primary ray of a camera is its `f64` ray's rounding).
+    #[must_use]
+    pub fn to_f32(&self) -> Ray {
+        #[expect(clippy::cast_possible_truncation, reason = "the one rounding to f32")]
+        Ray {
+            origin: to_f32(self.origin),
+            dir: to_f32(self.dir),
+            t_min: self.t_min as f32,
+            t_max: self.t_max as f32,
+        }
+    }
+
     /// The point at parameter `t`.
     #[must_use]
     pub fn at(&self, t: f64) -> DVec3 {

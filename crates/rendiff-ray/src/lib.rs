@@ -215,7 +215,9 @@ impl Tracer<'_, '_> {
         let (x, y) = cam.sample_point(sx, sy);
         let ray64 = cam.primary_ray64(x, y);
         let (o64, d64) = (ray64.origin, ray64.dir);
-        let ray = cam.primary_ray(x, y);
+        // `Camera::primary_ray` is this ray rounded to f32 (one rounding
+        // of each part): derived here rather than computed again.
+        let ray = ray64.to_f32();
         let Some(hit) = self.accel.intersect(&ray64) else {
             return Sample::background(self.scene.background);
         };
