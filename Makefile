@@ -77,12 +77,15 @@ bench-report:
 scaling:
 	$(CARGO) run --release -- bench --scaling --out target/rendiff-scaling
 
-## rendiff beside Embree 3 (primary rays) and POV-Ray 3.7 (whole renders);
-## needs `apt-get install libembree-dev povray`. Not part of `make test`.
+## rendiff beside Embree 3 (primary rays), POV-Ray 3.7 (whole renders) and
+## Mesa llvmpipe (the rasterizer's shaded frame, 1 thread); needs `apt-get
+## install libembree-dev povray libegl-dev libgl1-mesa-dev libgl1-mesa-dri`.
+## Not part of `make test`.
 peers:
 	$(CARGO) clippy --release --manifest-path peers/Cargo.toml -- -D warnings
 	$(CARGO) run --release --manifest-path peers/Cargo.toml -- embree
 	$(CARGO) run --release --manifest-path peers/Cargo.toml -- povray
+	$(CARGO) run --release --manifest-path peers/Cargo.toml -- llvmpipe
 
 doc:
 	RUSTDOCFLAGS="-D warnings" $(CARGO) doc --workspace --no-deps

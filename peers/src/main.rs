@@ -22,6 +22,7 @@
 //! Run from the repository root: `make peers`.
 
 mod embree;
+mod llvmpipe;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -110,6 +111,7 @@ fn main() -> Result<()> {
             )?;
             povray_cmp(&scenes, &threads, repeats)
         }
+        "llvmpipe" => llvmpipe::compare(repeats).map(|_| ()),
         other => bail!("unknown command {other:?}: expected embree or povray"),
     }
 }
