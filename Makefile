@@ -77,15 +77,16 @@ bench-report:
 scaling:
 	$(CARGO) run --release -- bench --scaling --out target/rendiff-scaling
 
-## rendiff beside Embree 3 (primary rays), POV-Ray 3.7 (whole renders) and
-## Mesa llvmpipe (the rasterizer's shaded frame, 1 thread); needs `apt-get
-## install libembree-dev povray libegl-dev libgl1-mesa-dev libgl1-mesa-dri`.
-## Not part of `make test`.
+## rendiff beside Embree 3 (rays, builds), POV-Ray 3.7 (render phase and
+## whole process) and Mesa llvmpipe (the rasterizer's shaded frame), one
+## thread, ending in the table of every measure; needs `apt-get install
+## libembree-dev povray libegl-dev libgl1-mesa-dev libgl1-mesa-dri`.
+## Not part of `make test`. (`rendiff-peers embree|povray|llvmpipe` run
+## one comparison, on 1 and on all threads.)
 peers:
 	$(CARGO) clippy --release --manifest-path peers/Cargo.toml -- -D warnings
-	$(CARGO) run --release --manifest-path peers/Cargo.toml -- embree
-	$(CARGO) run --release --manifest-path peers/Cargo.toml -- povray
-	$(CARGO) run --release --manifest-path peers/Cargo.toml -- llvmpipe
+	$(CARGO) build --release
+	$(CARGO) run --release --manifest-path peers/Cargo.toml -- summary
 
 doc:
 	RUSTDOCFLAGS="-D warnings" $(CARGO) doc --workspace --no-deps

@@ -1,14 +1,26 @@
 //! rendiff beside its peers.
 //!
 //! ```text
+//! rendiff-peers summary [--repeats N]
 //! rendiff-peers embree [SCENE.toml] [--subdivide K] [--repeats N]
 //! rendiff-peers povray [SCENE.toml ...] [--threads 1,2] [--repeats N]
+//! rendiff-peers llvmpipe [--repeats N]
 //! ```
+//!
+//! `summary` (what `make peers` runs): every comparison below plus the
+//! build at ten million triangles, the raster and ray frames, the whole
+//! process against POV-Ray and OBJ loading, ending in one table of every
+//! measure of issue 17 (see `summary.rs`).
 //!
 //! `embree`: the primary rays of a scene (default: the 940 k-triangle
 //! bunny of `benches/scenes/bunny_1m.toml`, split 4 times) traced by
-//! rendiff's BVH and by Embree 3's `rtcIntersect1` (the single-ray API),
-//! on one thread and on all; the BVH builds timed too; the hits compared.
+//! rendiff's BVH and by Embree 3's `rtcIntersect1` (the single-ray API)
+//! in scanline order, and in 4×2 blocks against `rtcIntersect8`; one
+//! shadow ray from every visible point against `rtcOccluded1`; on one
+//! thread and on all; the BVH builds timed too; the hits compared.
+//!
+//! `llvmpipe`: the rasterizer's shaded frame of the same bunny against
+//! Mesa's llvmpipe on one thread (see `llvmpipe.rs`).
 //!
 //! `povray`: each scene rendered by POV-Ray 3.7 from `rendiff pov`'s
 //! mesh export (the same triangles) and by both backends, at equal thread
@@ -23,6 +35,7 @@
 
 mod embree;
 mod llvmpipe;
+mod summary;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -35,6 +48,8 @@ use rendiff::math::{Ray64, to_f32};
 use rendiff::pov::golden::{self, Variant};
 use rendiff::shade::Visibility;
 use rendiff::{Backend, Overrides, Prepared};
+
+use summary::bundled as bundled_scenes;
 
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
@@ -80,7 +95,7 @@ fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let Some(cmd) = args.first() else {
         bail!(
-            "usage: rendiff-peers embree [SCENE] [--subdivide K] [--repeats N] | povray [SCENE...] [--threads 1,2] [--repeats N]"
+            "usage: rendiff-peers summary [--repeats N] | embree [SCENE] [--subdivide K] [--repeats N] | povray [SCENE...] [--threads 1,2] [--repeats N] | llvmpipe [--repeats N]"
         );
     };
     let rest = &args[1..];
@@ -97,22 +112,17 @@ fn main() -> Result<()> {
         "povray" => {
             let mut scenes = positional(rest);
             if scenes.is_empty() {
-                scenes = std::fs::read_dir("scenes")
-                    .context("run from the repository root")?
-                    .filter_map(Result::ok)
-                    .map(|e| e.path())
-                    .filter(|p| p.extension().is_some_and(|x| x == "toml"))
-                    .collect();
-                scenes.sort();
+                scenes = bundled_scenes()?;
             }
             let threads: Vec<usize> = flag(rest, "--threads").map_or_else(
                 || Ok(vec![1, all_threads()]),
                 |s| s.split(',').map(str::parse).collect(),
             )?;
-            povray_cmp(&scenes, &threads, repeats)
+            povray_cmp(&scenes, &threads, repeats).map(|_| ())
         }
+        "summary" => summary::summary(repeats),
         "llvmpipe" => llvmpipe::compare(repeats).map(|_| ()),
-        other => bail!("unknown command {other:?}: expected embree or povray"),
+        other => bail!("unknown command {other:?}: expected summary, embree, povray or llvmpipe"),
     }
 }
 
@@ -439,7 +449,11 @@ fn within(job: &Prepared, frame: &rendiff::frame::Frame, variant: Variant) -> Op
     Some(ok as f64 / frame.color.len() as f64 * 100.0)
 }
 
-fn povray_cmp(scenes: &[PathBuf], threads: &[usize], repeats: usize) -> Result<()> {
+/// POV-Ray's render phase against the better backend, per thread count:
+/// (threads, geometric mean, worst speed-up, the worst scene).
+type PovFigures = Vec<(usize, f64, f64, String)>;
+
+fn povray_cmp(scenes: &[PathBuf], threads: &[usize], repeats: usize) -> Result<PovFigures> {
     let work = std::env::temp_dir().join(format!("rendiff-peers-{}", std::process::id()));
     std::fs::create_dir_all(&work)?;
     println!("scene,threads,backend,pov_variant,pov_trace_ms,ours_ms,speedup,within_2_255_pct");
@@ -488,16 +502,18 @@ fn povray_cmp(scenes: &[PathBuf], threads: &[usize], repeats: usize) -> Result<(
             }
         }
     }
+    let mut figures = Vec::new();
     for &n in threads {
-        let r: Vec<f64> = ratios.iter().filter(|x| x.1 == n).map(|x| x.2).collect();
-        if !r.is_empty() {
-            let min = r.iter().copied().fold(f64::INFINITY, f64::min);
-            let geo = (r.iter().map(|x| x.ln()).sum::<f64>() / r.len() as f64).exp();
+        let r: Vec<&(String, usize, f64)> = ratios.iter().filter(|x| x.1 == n).collect();
+        if let Some(worst) = r.iter().min_by(|a, b| a.2.total_cmp(&b.2)) {
+            let geo = (r.iter().map(|x| x.2.ln()).sum::<f64>() / r.len() as f64).exp();
             println!(
-                "# {n} thread(s): best backend per scene is {min:.2}x (worst scene) … geometric mean {geo:.2}x faster than POV-Ray's render phase"
+                "# {n} thread(s): best backend per scene is {:.2}x ({}, the worst scene) … geometric mean {geo:.2}x faster than POV-Ray's render phase",
+                worst.2, worst.0
             );
+            figures.push((n, geo, worst.2, worst.0.clone()));
         }
     }
     let _ = std::fs::remove_dir_all(&work);
-    Ok(())
+    Ok(figures)
 }

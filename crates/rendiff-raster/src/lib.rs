@@ -868,10 +868,10 @@ fn shade_pass(
                 // The weights the ray tracer shades with: the f64 camera
                 // ray of this sample against the visible triangle.
                 let (x, y) = cam.sample_point(sx, sy);
-                let (o64, d64) = cam.primary_ray_f64(x, y);
-                let (b, p64) = scene.view_weights(tri, o64, d64);
+                let ray64 = cam.primary_ray64(x, y);
+                let (b, p64) = scene.view_weights(tri, ray64.origin, ray64.dir);
                 let sp = scene.surface_at(tri, b);
-                let ray = cam.primary_ray(x, y);
+                let ray = ray64.to_f32();
                 let shaded = shade::shade(&ctx, &sp, ray.dir, visibility);
                 let s = Sample::hit(shaded.local, cam.frame_depth(p64), tri, shaded.flags);
                 band.set(sx, 0, s);

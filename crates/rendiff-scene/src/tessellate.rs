@@ -18,8 +18,6 @@
 //! a closed object with negative signed volume has its winding reversed so
 //! its counter-clockwise side faces out (DESIGN.md §7).
 
-use std::collections::HashMap;
-
 use crate::scene::{LoadError, MAX_COORDINATE, Object, Scene, Shape};
 use rendiff_core::analytic::{AnalyticKind, Placed, superellipsoid_f, superellipsoid_gradient};
 use rendiff_core::camera::Camera;
@@ -1029,9 +1027,7 @@ fn weld_positions(
     piece: &Piece,
 ) -> Result<(Vec<Vec3>, Vec<[u32; 3]>), LoadError> {
     let tr = &obj.transform;
-    let mut weld: HashMap<[u32; 3], u32> = HashMap::with_capacity(piece.positions.len());
-    let mut welded: Vec<Vec3> = Vec::with_capacity(piece.positions.len());
-    let mut remap: Vec<u32> = Vec::with_capacity(piece.positions.len());
+    let mut world: Vec<Vec3> = Vec::with_capacity(piece.positions.len());
     for (k, p) in piece.positions.iter().enumerate() {
         let w = tr.point(*p);
         if !w.is_finite() || w.abs().max_element() > MAX_COORDINATE {
@@ -1044,13 +1040,37 @@ fn weld_positions(
                 ),
             });
         }
-        let w32 = to_f32(w);
-        let next = u32::try_from(welded.len()).unwrap_or(u32::MAX);
-        let id = *weld.entry(weld_key(w32)).or_insert_with(|| {
-            welded.push(w32);
-            next
-        });
-        remap.push(id);
+        world.push(to_f32(w));
+    }
+    // Equal positions found by sorting (key, index) pairs: streaming and
+    // cache-friendly where a hash map's probes miss at every vertex, and
+    // with no input that degrades it. Each welded position keeps its first
+    // occurrence's place, so the result is what a first-come numbering
+    // gives.
+    let mut order: Vec<([u32; 3], u32)> = world
+        .iter()
+        .zip(0u32..)
+        .map(|(w, k)| (weld_key(*w), k))
+        .collect();
+    order.sort_unstable();
+    // first[k]: the first vertex with vertex k's position.
+    let mut first: Vec<u32> = vec![0; world.len()];
+    for group in order.chunk_by(|a, b| a.0 == b.0) {
+        let lead = group[0].1;
+        for &(_, k) in group {
+            first[k as usize] = lead;
+        }
+    }
+    let mut welded: Vec<Vec3> = Vec::with_capacity(world.len());
+    let mut remap: Vec<u32> = Vec::with_capacity(world.len());
+    for (k, w) in world.iter().enumerate() {
+        let lead = first[k] as usize;
+        if lead == k {
+            remap.push(u32::try_from(welded.len()).unwrap_or(u32::MAX));
+            welded.push(*w);
+        } else {
+            remap.push(remap[lead]);
+        }
     }
     let tris: Vec<[u32; 3]> = piece
         .tris
@@ -1284,6 +1304,7 @@ fn append(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::collections::HashMap;
 
     #[test]
     fn sphere_grid_is_closed_and_outward() {

@@ -148,28 +148,35 @@ fn lines(text: &str) -> impl Iterator<Item = &str> {
     })
 }
 
-/// Splits a line's content into `out` at white space (`char::is_whitespace`,
-/// with a fast path for ASCII).
-fn tokenize<'a>(content: &'a str, out: &mut Vec<&'a str>) {
+/// Splits a line into `out` at white space (`char::is_whitespace`), up to
+/// a `#` (a comment starts anywhere), with one pass over the bytes for
+/// ASCII lines.
+fn tokenize<'a>(line: &'a str, out: &mut Vec<&'a str>) {
     out.clear();
-    if !content.is_ascii() {
-        out.extend(content.split_whitespace());
-        return;
-    }
     // The ASCII characters `char::is_whitespace` accepts.
     let space = |b: u8| matches!(b, b' ' | b'\t' | b'\n' | 0x0B | 0x0C | b'\r');
-    let bytes = content.as_bytes();
+    let bytes = line.as_bytes();
     let mut i = 0;
     while i < bytes.len() {
         while i < bytes.len() && space(bytes[i]) {
             i += 1;
         }
         let start = i;
-        while i < bytes.len() && !space(bytes[i]) {
+        while i < bytes.len() && !space(bytes[i]) && bytes[i] != b'#' && bytes[i].is_ascii() {
             i += 1;
         }
+        if i < bytes.len() && !bytes[i].is_ascii() {
+            // Other white space: the rest of the line the slow way.
+            let rest = &line[start..];
+            let content = rest.find('#').map_or(rest, |k| &rest[..k]);
+            out.extend(content.split_whitespace());
+            return;
+        }
         if i > start {
-            out.push(&content[start..i]);
+            out.push(&line[start..i]);
+        }
+        if bytes.get(i) == Some(&b'#') {
+            return;
         }
     }
 }
@@ -719,7 +726,12 @@ fn read(
     budget: &Budget,
     reserved: &mut u64,
 ) -> Result<MeshData, LoadError> {
-    let text = String::from_utf8_lossy(bytes);
+    // Valid UTF-8 (every ASCII file) is borrowed after one fast check;
+    // only other bytes go through the slower lossy decoding.
+    let text = std::str::from_utf8(bytes).map_or_else(
+        |_| String::from_utf8_lossy(bytes),
+        std::borrow::Cow::Borrowed,
+    );
     let text = text.strip_prefix('\u{FEFF}').unwrap_or(&text);
     let mut r = Reader {
         path,
@@ -750,8 +762,7 @@ fn read(
     let result = (|| {
         for (k, raw) in lines(text).enumerate() {
             last = k + 1;
-            let content = raw.find('#').map_or(raw, |i| &raw[..i]);
-            tokenize(content, &mut toks);
+            tokenize(raw, &mut toks);
             r.statement(last, &toks)?;
         }
         r.end_model();
@@ -915,6 +926,34 @@ mod tests {
     }
 
     const TRI: &str = "v 0 0 0\nv 1 0 0\nv 0 1 0\n";
+
+    /// The one-pass tokenizer splits every line as "cut at the first `#`,
+    /// then `split_whitespace`" does, ASCII or not.
+    #[test]
+    fn tokenizer_matches_cut_then_split() {
+        let lines = [
+            "v 1 2 3",
+            "  f 1/2/3\t4//5 6 ",
+            "v 1#2 3",
+            "#only a comment",
+            "v 1 2 3 # trailing",
+            "g caf\u{e9} n\u{e4}me # x",
+            "v\u{a0}1\u{2003}2 3",
+            "usemtl \u{fffd}\u{fffd}#\u{a0}x",
+            "f 1 2 3\u{a0}#\u{a0}4",
+            "\u{85}v 1 2 3\u{85}",
+            "",
+            "   ",
+            "x\u{a0}",
+        ];
+        let mut got = Vec::new();
+        for line in lines {
+            tokenize(line, &mut got);
+            let cut = line.find('#').map_or(line, |i| &line[..i]);
+            let want: Vec<&str> = cut.split_whitespace().collect();
+            assert_eq!(got, want, "{line:?}");
+        }
+    }
 
     #[test]
     fn comments_start_anywhere() {

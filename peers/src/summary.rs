@@ -1,0 +1,328 @@
+//! `rendiff-peers summary`: every measure of issue 17's table from one
+//! run, each beside the figure it started from and its target.
+//!
+//! The rows: primary, coherent and shadow rays and the BVH build against
+//! Embree 3 (the 940 k-triangle bunny at 1080p), the build at ten million
+//! triangles, the rasterizer's shaded frame against the ray tracer's (BVH
+//! prebuilt) and against Mesa llvmpipe, the render phase against POV-Ray
+//! 3.7 over the bundled scenes, the whole process against POV-Ray's on
+//! the largest bundled mesh scene, and loading a 177 k-triangle OBJ. All
+//! on one thread, medians.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use rendiff::accel::{Accel, AccelOptions};
+use rendiff::pov::golden::{self, Variant};
+use rendiff::{Overrides, Prepared, raster};
+
+use crate::{median, pool, time_ms};
+
+/// One row: the measure, where it stood when the issue was filed, the
+/// figure now, and the target.
+struct Row {
+    measure: &'static str,
+    before: &'static str,
+    now: String,
+    target: &'static str,
+}
+
+/// Runs every comparison and prints the table.
+pub fn summary(repeats: usize) -> Result<()> {
+    let mut rows = Vec::new();
+    let bunny = Path::new("benches/scenes/bunny_1m.toml");
+    let rays = crate::embree_cmp(bunny, 4, repeats)?;
+    rows.push(Row {
+        measure: "primary rays, 940 k bunny 1080p, vs Embree rtcIntersect1 (speed ratio)",
+        before: "0.65×",
+        now: format!("{:.2}×", rays.primary),
+        target: "≥ 1.0×",
+    });
+    rows.push(Row {
+        measure: "coherent 4×2 blocks vs Embree rtcIntersect8 (ours: single rays)",
+        before: "—",
+        now: format!("{:.2}×", rays.coherent),
+        target: "≥ 1.0×",
+    });
+    rows.push(Row {
+        measure: "shadow rays, same scene (M rays/s; vs Embree rtcOccluded1)",
+        before: "2.3 M rays/s",
+        now: format!(
+            "{:.2} M rays/s ({:.2}× Embree)",
+            rays.shadow_mrays, rays.shadow_vs_embree
+        ),
+        target: "≥ 4.6 M rays/s",
+    });
+    rows.push(Row {
+        measure: "BVH build 940 k, ours / Embree",
+        before: "1.54×",
+        now: format!("{:.2}×", rays.build),
+        target: "≤ 1.0×",
+    });
+    let (ours10, embree10) = build_10m(repeats.min(3))?;
+    rows.push(Row {
+        measure: "BVH build at 10 M triangles (µs per triangle; Embree)",
+        before: "0.5 µs",
+        now: format!("{ours10:.3} µs (Embree {embree10:.3} µs)"),
+        target: "≤ 0.25 µs",
+    });
+    let (raster_ms, ray_ms) = frames(repeats)?;
+    rows.push(Row {
+        measure: "raster shaded frame vs ray frame, BVH prebuilt, shadowless (940 k, 1080p)",
+        before: "2.4×",
+        now: format!(
+            "{:.2}× ({raster_ms:.1} / {ray_ms:.1} ms)",
+            ray_ms / raster_ms
+        ),
+        target: "≥ 5×",
+    });
+    let llvm = match crate::llvmpipe::compare(repeats) {
+        Ok(r) => format!("{r:.2}×"),
+        Err(e) => format!("not measured: {e:#}"),
+    };
+    rows.push(Row {
+        measure: "raster shaded frame vs Mesa llvmpipe (speed ratio)",
+        before: "1.3–1.6× (not measured in the project)",
+        now: llvm,
+        target: "≥ 2×",
+    });
+    let scenes = crate::bundled_scenes()?;
+    let pov = crate::povray_cmp(&scenes, &[1], repeats)?;
+    let (_, geo, worst, worst_scene) = pov.first().context("no POV-Ray figures")?;
+    rows.push(Row {
+        measure: "render phase vs POV-Ray 3.7, geometric mean over bundled scenes (worst)",
+        before: "4.7× (worst 2.8×)",
+        now: format!("{geo:.2}× (worst {worst:.2}×, {worst_scene})"),
+        target: "≥ 10× (worst ≥ 5×)",
+    });
+    let dense = Path::new("scenes/dense.toml");
+    let (ours_ms, pov_ms) = whole_process(dense, repeats.min(5))?;
+    rows.push(Row {
+        measure: "whole process vs POV-Ray (load, build, render, write), scenes/dense.toml",
+        before: "4.4× (a 202 k dragon at 1280×720)",
+        now: format!("{:.2}× ({ours_ms:.0} / {pov_ms:.0} ms)", pov_ms / ours_ms),
+        target: "≥ 20×",
+    });
+    let (load_ms, mb, tris) = obj_load(repeats)?;
+    rows.push(Row {
+        measure: "OBJ load + tessellate",
+        before: "~0.29 s (7 MB, 200 k)",
+        now: format!("{:.3} s ({mb:.1} MB, {tris} triangles)", load_ms / 1e3),
+        target: "≤ 0.1 s",
+    });
+    let mut out = String::from("\n| measure | when filed | now | target |\n|---|---|---|---|\n");
+    for r in &rows {
+        let _ = writeln!(
+            out,
+            "| {} | {} | {} | {} |",
+            r.measure, r.before, r.now, r.target
+        );
+    }
+    println!("{out}");
+    Ok(())
+}
+
+/// BVH build time per triangle at ten million triangles
+/// (`benches/scenes/ten_million.toml`), ours and Embree's, 1 thread, in µs.
+fn build_10m(repeats: usize) -> Result<(f64, f64)> {
+    let job = Prepared::load(
+        Path::new("benches/scenes/ten_million.toml"),
+        &Overrides::default(),
+    )?;
+    let tri = &job.tri;
+    let p = pool(1)?;
+    let ours = time_ms(&p, repeats, &|| {
+        std::hint::black_box(Accel::new(tri, AccelOptions::default()));
+    });
+    let positions: Vec<[f32; 3]> = tri.positions.iter().map(|v| v.to_array()).collect();
+    let embree = time_ms(&p, repeats, &|| {
+        std::hint::black_box(
+            crate::embree::EmbreeScene::new(&positions, &tri.tris, "threads=1").ok(),
+        );
+    });
+    let n = tri.len() as f64;
+    println!(
+        "build at {} triangles, 1 thread: ours {ours:.0} ms, Embree {embree:.0} ms",
+        tri.len()
+    );
+    Ok((ours * 1e3 / n, embree * 1e3 / n))
+}
+
+/// The rasterizer's shaded frame and the ray tracer's (BVH built
+/// beforehand) of the 940 k bunny with its light shadowless, 1 thread, ms.
+fn frames(repeats: usize) -> Result<(f64, f64)> {
+    let job = Prepared::load(
+        Path::new("benches/scenes/bunny_1m.toml"),
+        &Overrides::default(),
+    )?;
+    let mut t = job.tri.subdivided(4);
+    t.lights[0].shadowless = true;
+    let mut opts = job.raster_options();
+    opts.shadows_needed = false;
+    let p = pool(1)?;
+    let raster_ms = time_ms(&p, repeats, &|| {
+        std::hint::black_box(raster::render(&t, &opts));
+    });
+    let accel = Accel::new(&t, AccelOptions::default());
+    let ray_opts = rendiff::ray::RayOptions {
+        max_depth: 1,
+        shadows: false,
+        gate_eps: rendiff::GATE_EPS,
+    };
+    let ray_ms = time_ms(&p, repeats, &|| {
+        std::hint::black_box(rendiff::ray::render(&accel, &ray_opts));
+    });
+    println!(
+        "frames, 940 k bunny 1080p, shadowless, 1 thread: raster {raster_ms:.1} ms, ray (BVH prebuilt) {ray_ms:.1} ms"
+    );
+    Ok((raster_ms, ray_ms))
+}
+
+/// The whole process, wall clock, 1 thread: `rendiff render` (load,
+/// tessellate, build, render, PNG) with its faster backend at equal
+/// error, against `povray` on the scene's mesh export (start-up, parse,
+/// bounding, trace, PNG). Needs `target/release/rendiff` (`make peers`
+/// builds it). In ms.
+fn whole_process(scene: &Path, repeats: usize) -> Result<(f64, f64)> {
+    let exe = Path::new("target/release/rendiff");
+    if !exe.exists() {
+        bail!(
+            "{} is missing: run `cargo build --release` first",
+            exe.display()
+        );
+    }
+    let job = Prepared::load(scene, &Overrides::default())?;
+    let refs = golden::references(&job.scene, &job.tri)?;
+    let main = refs
+        .iter()
+        .find(|r| r.variant == Variant::Main)
+        .context("no POV-Ray export")?;
+    let work = std::env::temp_dir().join(format!("rendiff-whole-{}", std::process::id()));
+    std::fs::create_dir_all(&work)?;
+    let pov = work.join("scene.pov");
+    std::fs::write(&pov, &main.export.text)?;
+    for img in &main.export.images {
+        img.materialise(&work)?;
+    }
+    let wall = |cmd: &mut Command| -> Result<f64> {
+        let t = Instant::now();
+        let out = cmd.output().context("could not run a peer")?;
+        if !out.status.success() {
+            bail!(
+                "{cmd:?} failed: {}",
+                String::from_utf8_lossy(&out.stderr)
+                    .lines()
+                    .last()
+                    .unwrap_or("")
+            );
+        }
+        Ok(t.elapsed().as_secs_f64() * 1e3)
+    };
+    let (w, h) = main.export.render_size;
+    let dir = scene.parent().filter(|p| !p.as_os_str().is_empty());
+    let mut ours = Vec::new();
+    let mut theirs = Vec::new();
+    for _ in 0..repeats.max(1) {
+        let mut best = f64::INFINITY;
+        for backend in ["raster", "ray"] {
+            let ms = wall(
+                Command::new(exe)
+                    .args(["render", "--threads", "1", "--backend", backend, "-o"])
+                    .arg(work.join("ours.png"))
+                    .arg(scene),
+            )?;
+            best = best.min(ms);
+        }
+        ours.push(best);
+        theirs.push(wall(
+            Command::new("povray")
+                .current_dir(dir.unwrap_or(Path::new(".")))
+                .arg(format!("+I{}", pov.display()))
+                .arg(format!("+O{}", work.join("pov.png").display()))
+                .arg(format!("+W{w}"))
+                .arg(format!("+H{h}"))
+                .args(["-D", "-A", "+FN16", "File_Gamma=1.0", "+Q9", "+WT1"])
+                .arg(format!("+L{}", work.display())),
+        )?);
+    }
+    let _ = std::fs::remove_dir_all(&work);
+    let (ours, theirs) = (median(ours), median(theirs));
+    println!(
+        "whole process, {}, 1 thread: rendiff {ours:.0} ms (the faster backend), POV-Ray {theirs:.0} ms",
+        scene.display()
+    );
+    Ok((ours, theirs))
+}
+
+/// Loading and tessellating a 177 k-triangle OBJ: the bundled dragon
+/// (11 102 triangles) split twice into four, written as a plain `v`/`f`
+/// file. Returns (ms, MB, triangles).
+fn obj_load(repeats: usize) -> Result<(f64, f64, usize)> {
+    let work = std::env::temp_dir().join(format!("rendiff-obj-{}", std::process::id()));
+    std::fs::create_dir_all(&work)?;
+    let toml = work.join("load.toml");
+    let scene_text = |file: &str| {
+        format!(
+            "[image]\nwidth = 320\nheight = 240\n\n[camera]\neye = [0.0, 0.4, 3.0]\nlook_at = [0.0, 0.3, 0.0]\n\n\
+             [[lights]]\nkind = \"point\"\nposition = [2.0, 4.0, 4.0]\n\n\
+             [materials.jade]\npigment = [0.35, 0.7, 0.45]\n\n\
+             [[objects]]\nkind = \"mesh\"\nfile = \"{file}\"\nmaterial = \"jade\"\n"
+        )
+    };
+    std::fs::copy(
+        "scenes/meshes/stanford_dragon_res4.obj",
+        work.join("dragon.obj"),
+    )?;
+    std::fs::write(&toml, scene_text("dragon.obj"))?;
+    let one = Prepared::load(&toml, &Overrides::default())?.tri;
+    let big = one.subdivided(2);
+    let mut text = String::with_capacity(big.positions.len() * 40 + big.tris.len() * 30);
+    for v in &big.positions {
+        let _ = writeln!(text, "v {} {} {}", v.x, v.y, v.z);
+    }
+    for t in &big.tris {
+        let _ = writeln!(text, "f {} {} {}", t[0] + 1, t[1] + 1, t[2] + 1);
+    }
+    let obj = work.join("dragon177k.obj");
+    std::fs::write(&obj, &text)?;
+    std::fs::write(&toml, scene_text("dragon177k.obj"))?;
+    let p = pool(1)?;
+    let mut tris = 0;
+    let ms = median(
+        (0..repeats.max(1))
+            .map(|_| {
+                p.install(|| {
+                    let t = Instant::now();
+                    let job = Prepared::load(&toml, &Overrides::default());
+                    let ms = t.elapsed().as_secs_f64() * 1e3;
+                    tris = job.map_or(0, |j| j.tri.len());
+                    ms
+                })
+            })
+            .collect(),
+    );
+    let _ = std::fs::remove_dir_all(&work);
+    if tris == 0 {
+        bail!("the generated OBJ did not load");
+    }
+    println!(
+        "OBJ load + tessellate, {:.1} MB, {tris} triangles, 1 thread: {ms:.1} ms",
+        text.len() as f64 / 1e6
+    );
+    Ok((ms, text.len() as f64 / 1e6, tris))
+}
+
+/// The bundled scenes, sorted.
+pub fn bundled() -> Result<Vec<PathBuf>> {
+    let mut scenes: Vec<PathBuf> = std::fs::read_dir("scenes")
+        .context("run from the repository root")?
+        .filter_map(Result::ok)
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+        .collect();
+    scenes.sort();
+    Ok(scenes)
+}
