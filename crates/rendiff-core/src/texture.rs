@@ -97,10 +97,7 @@ impl Texture {
                     e
                 } else {
                     TextureError {
-                        message: format!(
-                            "not a PNG or JPEG image (it starts with `{}`)",
-                            crate::escape::excerpt(&bytes[..bytes.len().min(8)])
-                        ),
+                        message: "not a PNG or JPEG image: it starts with neither signature".into(),
                     }
                 }
             })
@@ -154,8 +151,10 @@ impl Texture {
             .set_max_height(usize::from(u16::MAX))
             .jpeg_set_out_colorspace(ColorSpace::RGB);
         let mut dec = zune_jpeg::JpegDecoder::new_with_options(ZCursor::new(bytes), options);
+        // The decoder's messages may end in a newline.
+        let words = |e: zune_jpeg::errors::DecodeErrors| e.to_string().trim().to_string();
         dec.decode_headers()
-            .map_err(|e| err(format!("not a readable JPEG: {e}")))?;
+            .map_err(|e| err(format!("not a readable JPEG: {}", words(e))))?;
         let (w, h) = dec
             .dimensions()
             .ok_or_else(|| err("not a readable JPEG: no frame header".into()))?;
@@ -181,7 +180,7 @@ impl Texture {
                 .map_err(|e| e.to_string())?;
             let rgb = dec
                 .decode()
-                .map_err(|e| format!("not a readable JPEG: {e}"))?;
+                .map_err(|e| format!("not a readable JPEG: {}", words(e)))?;
             let n = (w as usize) * (h as usize);
             if rgb.len() < 3 * n {
                 return Err(format!(
@@ -551,6 +550,47 @@ mod tests {
             t.sample(Vec2::new(3.25, -1.75)),
             t.sample(Vec2::new(0.25, 0.25))
         );
+    }
+
+    fn jpeg() -> Vec<u8> {
+        let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/obj/mtl/tiles.jpg");
+        std::fs::read(p).unwrap()
+    }
+
+    #[test]
+    fn jpeg_texels_are_linear_codes_and_cut_files_are_errors() {
+        let t = Texture::from_bytes(Path::new("t.jpg"), &jpeg()).unwrap();
+        assert_eq!(
+            (t.width(), t.height(), t.format()),
+            (16, 16, ImageFormat::Jpeg)
+        );
+        assert!(!t.has_alpha());
+        for x in t.texels() {
+            for &c in &x[..3] {
+                let code = c * 255.0;
+                assert!((code - code.round()).abs() < 1e-3, "{c} is not v/255");
+            }
+            assert_eq!(x[3], 1.0);
+        }
+        // Cut anywhere inside its scans: an error, never a grey patch.
+        let j = jpeg();
+        for keep in [j.len() / 3, j.len() / 2, j.len() - 40] {
+            let e = Texture::from_bytes(Path::new("t.jpg"), &j[..keep]).unwrap_err();
+            assert!(
+                e.message.starts_with("not a readable JPEG: "),
+                "{keep}: {e}"
+            );
+        }
+        let e = Texture::from_bytes(Path::new("t.jpg"), &[0xFF, 0xD8]).unwrap_err();
+        assert!(e.message.contains("JPEG"), "{e}");
+    }
+
+    #[test]
+    fn a_tint_multiplies_the_colour_and_keeps_alpha() {
+        let t = checker().tinted(Rgb::new(0.5, 1.0, 0.25));
+        assert_eq!(t.texels()[3], [0.5, 1.0, 0.25, 1.0]);
+        assert_eq!(t.tint(), Some(Rgb::new(0.5, 1.0, 0.25)));
+        assert_eq!(checker().tint(), None);
     }
 
     #[test]
