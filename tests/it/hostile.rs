@@ -1326,13 +1326,16 @@ fn jpeg_claiming(w: u16, h: u16) -> Vec<u8> {
 /// A quad OBJ with uvs that names `mtl.mtl` and selects `usemtl` (line 8).
 const QUAD_OBJ: &str = "mtllib mtl.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 1\nusemtl skin\nf 1/1 2/2 3/2 4/1\n";
 
+/// A case: what it is, the files of its folder `m`, the message.
+type MtlCase = (&'static str, Vec<(&'static str, Vec<u8>)>, &'static str);
+
 /// Each case: the files of a folder beside the scene (which renders
 /// `m/quad.obj` with `material = "obj"`), and the start of the message
 /// after `error: `, naming the file and line.
 #[test]
 fn broken_material_libraries_and_textures_are_refused_by_file_and_line() {
     let lib = |body: &str| format!("newmtl skin\nKd 0.8 0.8 0.8\n{body}");
-    let cases: Vec<(&str, Vec<(&str, Vec<u8>)>, &str)> = vec![
+    let cases: Vec<MtlCase> = vec![
         (
             "missing library",
             vec![("quad.obj", QUAD_OBJ.replace("mtl.mtl", "gone.mtl").into())],

@@ -719,16 +719,11 @@ mod tests {
         let m = default_material("d".into());
         assert_eq!(m.pigment, Pigment::Color(Rgb::WHITE));
         assert_eq!((m.diffuse, m.ambient, m.specular), (0.8, 0.0, 0.0));
-        assert_eq!(m, mapped("newmtl a\n").clone_named("d"));
-    }
-
-    impl Material {
-        fn clone_named(&self, name: &str) -> Material {
-            Material {
-                name: name.into(),
-                ..self.clone()
-            }
-        }
+        let named = Material {
+            name: "d".into(),
+            ..mapped("newmtl a\n")
+        };
+        assert_eq!(m, named);
     }
 
     #[test]

@@ -1092,6 +1092,30 @@ mod tests {
     }
 
     #[test]
+    fn usemtl_and_mtllib_are_recorded_per_face() {
+        let m = load(&format!(
+            "mtllib my lib.mtl\n{TRI}f 1 2 3\nusemtl  red  paint \nf 1 2 3\nusemtl\nv 1 1 0\nf 1 2 4 3\nusemtl red  paint\nf 3 2 1\n"
+        ))
+        .unwrap();
+        let named = |v: &[Named]| {
+            v.iter()
+                .map(|n| (n.name.clone(), n.line))
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(named(&m.mtllibs), [("my lib.mtl".to_string(), 1)]);
+        // A name keeps its inner spaces; a bare `usemtl` names "" (Blender).
+        assert_eq!(
+            named(&m.usemtl),
+            [("red  paint".to_string(), 6), (String::new(), 8)]
+        );
+        // Before any usemtl, then red paint, the quad's two triangles "",
+        // red paint again.
+        assert_eq!(m.tri_usemtl, [NO_USEMTL, 0, 1, 1, 0]);
+        // Without usemtl nothing is stored per triangle.
+        assert!(load(&format!("{TRI}f 1 2 3\n")).unwrap().tri_usemtl.is_empty());
+    }
+
+    #[test]
     fn binary_garbage_is_quoted_briefly() {
         // 8 MB of NULs: one line, one token.
         let nuls = vec![0u8; 8 << 20];
