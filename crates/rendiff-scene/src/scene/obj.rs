@@ -1112,7 +1112,12 @@ mod tests {
         // red paint again.
         assert_eq!(m.tri_usemtl, [NO_USEMTL, 0, 1, 1, 0]);
         // Without usemtl nothing is stored per triangle.
-        assert!(load(&format!("{TRI}f 1 2 3\n")).unwrap().tri_usemtl.is_empty());
+        assert!(
+            load(&format!("{TRI}f 1 2 3\n"))
+                .unwrap()
+                .tri_usemtl
+                .is_empty()
+        );
     }
 
     #[test]
