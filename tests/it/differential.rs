@@ -80,6 +80,7 @@ every_bundled_scene!(
     painter_floor,
     polygons,
     spheres,
+    spider,
     superellipsoids,
     teapot,
     textured,

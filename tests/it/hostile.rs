@@ -1301,3 +1301,191 @@ fn a_mesh_of_proc_self_environ_prints_no_environment() {
     assert!(!r.stderr.contains("hunter2"), "{}", r.stderr);
     assert!(r.stderr.len() < 1024, "{}", r.stderr);
 }
+
+// ---------------------------------------------------------------- OBJ materials
+
+/// A small valid JPEG (16x16, baseline), from the test data.
+fn jpeg() -> Vec<u8> {
+    std::fs::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/obj/mtl/tiles.jpg"))
+        .unwrap()
+}
+
+/// The JPEG with its frame header (SOF0) claiming `w`×`h`.
+fn jpeg_claiming(w: u16, h: u16) -> Vec<u8> {
+    let mut b = jpeg();
+    let at = b
+        .windows(2)
+        .position(|m| m == [0xFF, 0xC0])
+        .expect("a baseline frame header");
+    // FF C0, length (2), precision (1), height (2), width (2).
+    b[at + 5..at + 7].copy_from_slice(&h.to_be_bytes());
+    b[at + 7..at + 9].copy_from_slice(&w.to_be_bytes());
+    b
+}
+
+/// A quad OBJ with uvs that names `mtl.mtl` and selects `usemtl` (line 8).
+const QUAD_OBJ: &str = "mtllib mtl.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 1\nusemtl skin\nf 1/1 2/2 3/2 4/1\n";
+
+/// A case: what it is, the files of its folder `m`, the message.
+type MtlCase = (&'static str, Vec<(&'static str, Vec<u8>)>, &'static str);
+
+/// Each case: the files of a folder beside the scene (which renders
+/// `m/quad.obj` with `material = "obj"`), and the start of the message
+/// after `error: `, naming the file and line.
+#[test]
+fn broken_material_libraries_and_textures_are_refused_by_file_and_line() {
+    let lib = |body: &str| format!("newmtl skin\nKd 0.8 0.8 0.8\n{body}");
+    let cases: Vec<MtlCase> = vec![
+        (
+            "missing library",
+            vec![("quad.obj", QUAD_OBJ.replace("mtl.mtl", "gone.mtl").into())],
+            "m/quad.obj:1: could not read the material library m/gone.mtl: ",
+        ),
+        (
+            "library that is not text",
+            vec![("quad.obj", QUAD_OBJ.into()), ("mtl.mtl", vec![0u8; 4096])],
+            "m/mtl.mtl:1: unsupported MTL statement `\\0",
+        ),
+        (
+            "malformed Kd",
+            vec![
+                ("quad.obj", QUAD_OBJ.into()),
+                ("mtl.mtl", "newmtl skin\nKd 0.8 O.8 0.8\n".into()),
+            ],
+            "m/mtl.mtl:2: `O.8` is not a number",
+        ),
+        (
+            "undefined usemtl",
+            vec![
+                (
+                    "quad.obj",
+                    QUAD_OBJ.replace("usemtl skin", "usemtl bone").into(),
+                ),
+                ("mtl.mtl", lib("").into()),
+            ],
+            "m/quad.obj:8: usemtl `bone`: no material of that name in mtl.mtl (defined: `skin`)",
+        ),
+        (
+            "missing texture",
+            vec![
+                ("quad.obj", QUAD_OBJ.into()),
+                ("mtl.mtl", lib("map_Kd .\\gone.jpg\n").into()),
+            ],
+            "m/mtl.mtl:3: map_Kd: could not read image m/gone.jpg: ",
+        ),
+        (
+            "texture escaping the folder",
+            vec![
+                ("quad.obj", QUAD_OBJ.into()),
+                ("mtl.mtl", lib("map_Kd ..\\t.jpg\n").into()),
+            ],
+            "m/mtl.mtl:3: map_Kd: `..\\t.jpg` climbs out of the folder m with `..`",
+        ),
+        (
+            "absolute texture name",
+            vec![
+                ("quad.obj", QUAD_OBJ.into()),
+                ("mtl.mtl", lib("bump /etc/passwd\n").into()),
+            ],
+            "m/mtl.mtl:3: bump: `/etc/passwd` is an absolute name",
+        ),
+        (
+            "JPEG claiming 60000x60000",
+            vec![
+                ("quad.obj", QUAD_OBJ.into()),
+                ("mtl.mtl", lib("map_Kd huge.jpg\n").into()),
+                ("huge.jpg", jpeg_claiming(60000, 60000)),
+            ],
+            "m/mtl.mtl:3: map_Kd: image m/huge.jpg: image is 60000x60000; each side must be 1 … 16384",
+        ),
+        (
+            "truncated JPEG",
+            vec![
+                ("quad.obj", QUAD_OBJ.into()),
+                ("mtl.mtl", lib("map_Kd cut.jpg\n").into()),
+                ("cut.jpg", {
+                    let j = jpeg();
+                    j[..j.len() * 2 / 3].to_vec()
+                }),
+            ],
+            "m/mtl.mtl:3: map_Kd: image m/cut.jpg: not a readable JPEG: ",
+        ),
+        (
+            "a texture on a face without uvs",
+            vec![
+                (
+                    "quad.obj",
+                    QUAD_OBJ.replace("f 1/1 2/2 3/2 4/1", "f 1 2 3 4").into(),
+                ),
+                ("mtl.mtl", lib("map_Kd t.jpg\n").into()),
+                ("t.jpg", jpeg()),
+            ],
+            "m/quad.obj:9: this face has no uv (vt) on every corner, but its material \"mtl.mtl:skin\" uses an image",
+        ),
+    ];
+    for (what, files, message) in cases {
+        let dir = temp(&format!("mtl_{}", what.replace(' ', "_")));
+        std::fs::create_dir_all(dir.join("m")).unwrap();
+        for (name, bytes) in &files {
+            std::fs::write(dir.join("m").join(name), bytes).unwrap();
+        }
+        let obj = "[[objects]]\nkind = \"mesh\"\nfile = \"m/quad.obj\"\nmaterial = \"obj\"\n";
+        std::fs::write(dir.join("s.toml"), scene(32, 24, obj)).unwrap();
+        let before = tree(&dir);
+        let r = run(&dir, &["render", "s.toml", "-o", "out.png"]);
+        r.refused(what);
+        // One line, besides the peak-memory report.
+        let lines: Vec<&str> = r
+            .stderr
+            .lines()
+            .filter(|l| !l.starts_with("peak RSS: "))
+            .collect();
+        assert!(
+            lines.len() == 1 && lines[0].starts_with(&format!("error: {message}")),
+            "{what}: expected one line `error: {message}…`, got:\n{}",
+            r.stderr
+        );
+        assert!(r.stdout.is_empty(), "{what}");
+        assert_eq!(tree(&dir), before, "{what}: something was written");
+    }
+}
+
+#[test]
+fn jpeg_textures_of_a_scene_are_refused_by_their_header_and_when_cut_short() {
+    let dir = temp("jpeg_scene");
+    std::fs::write(dir.join("bomb.jpg"), jpeg_claiming(60000, 60000)).unwrap();
+    let j = jpeg();
+    std::fs::write(dir.join("cut.jpg"), &j[..j.len() / 2]).unwrap();
+    // A JPEG's end-of-image marker cut off alone still decodes (every
+    // scan is complete); its scans cut short do not.
+    std::fs::write(dir.join("ok.jpg"), &j).unwrap();
+    let sphere = |file: &str| {
+        format!(
+            "[materials.t]\npigment = {{ image = \"{file}\" }}\n[[objects]]\nkind = \"sphere\"\nmaterial = \"t\"\ncenter = [1.0, 0.5, 0.0]\nradius = 0.3\n"
+        )
+    };
+    let budget = rendiff::budget::DEFAULT_MEMORY_BUDGET;
+    for (file, message) in [
+        (
+            "bomb.jpg",
+            "error: bomb.jpg: image is 60000x60000; each side must be 1 … 16384",
+        ),
+        ("cut.jpg", "error: cut.jpg: not a readable JPEG: "),
+    ] {
+        std::fs::write(dir.join("t.toml"), scene(32, 24, &sphere(file))).unwrap();
+        let before = tree(&dir);
+        let r = run_limited(&dir, &["render", "t.toml", "-o", "t.png"], budget);
+        r.refused(file);
+        assert!(
+            r.stderr.lines().any(|l| l.starts_with(message)),
+            "{file}: {}",
+            r.stderr
+        );
+        r.within(file, budget, 5.0);
+        assert_eq!(tree(&dir), before, "{file}: something was written");
+    }
+    std::fs::write(dir.join("t.toml"), scene(32, 24, &sphere("ok.jpg"))).unwrap();
+    let r = run(&dir, &["render", "t.toml", "-o", "t.png"]);
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    assert!(dir.join("t.png").exists());
+}

@@ -36,6 +36,8 @@ mod hostile;
 mod lines;
 /// OBJ faces as exporters write them: keyhole faces load as rings.
 mod obj_faces;
+/// OBJ materials: a mesh's own .mtl per usemtl group, JPEG textures, their export.
+mod obj_materials;
 /// The painter's algorithm against the z-buffer.
 mod painter;
 /// The render plan: invariance with and without it, and each skip firing.

@@ -271,6 +271,37 @@ pub fn write_png(
     write_atomic(path, |w| w.write_all(&bytes))
 }
 
+/// Writes 16-bit RGB (or RGBA, with `alpha`) samples, row-major from the
+/// top, with a gAMA chunk of 1.0: texels as rendiff reads them, for
+/// POV-Ray's `image_map { png … gamma 1.0 }`.
+///
+/// # Errors
+///
+/// [`ImageIoError`] on encoding or I/O failure.
+pub fn write_png16(
+    path: &Path,
+    width: u32,
+    height: u32,
+    alpha: bool,
+    samples: &[u16],
+) -> Result<(), ImageIoError> {
+    let mut out = Vec::new();
+    {
+        let mut enc = png::Encoder::new(&mut out, width, height);
+        enc.set_color(if alpha {
+            png::ColorType::Rgba
+        } else {
+            png::ColorType::Rgb
+        });
+        enc.set_depth(png::BitDepth::Sixteen);
+        enc.set_source_gamma(png::ScaledFloat::new(1.0));
+        let data: Vec<u8> = samples.iter().flat_map(|v| v.to_be_bytes()).collect();
+        let mut w = enc.write_header().map_err(|e| png_err(path, e))?;
+        w.write_image_data(&data).map_err(|e| png_err(path, e))?;
+    }
+    write_atomic(path, |w| w.write_all(&out))
+}
+
 /// Writes RGBA8 pixels given as little-endian u32 words (R the low byte).
 ///
 /// # Errors

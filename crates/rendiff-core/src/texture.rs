@@ -1,10 +1,16 @@
-//! Image textures: decoding PNG bytes into linear texels, and the bilinear
-//! lookup of DESIGN.md §3 / POVRAY.md §6 (texel centres at `(k + 0.5)/w`,
-//! uv (0, 0) at the image's bottom-left corner, repeat outside [0, 1)).
+//! Image textures: decoding PNG and JPEG bytes into linear texels, and the
+//! bilinear lookup of DESIGN.md §3 / POVRAY.md §6 (texel centres at
+//! `(k + 0.5)/w`, uv (0, 0) at the image's bottom-left corner, repeat
+//! outside [0, 1)).
 //!
 //! Texels are read as *linear* values (`v/255` or `v/65535`), never
 //! sRGB-decoded: POV-Ray with `gamma 1.0` does the same, so a texture means
-//! the same number to every renderer.
+//! the same number to every renderer. The format is told by the file's
+//! first bytes (the PNG signature, JPEG's start-of-image marker), never by
+//! its name. JPEG is decoded by `zune-jpeg` (the decoder behind the image
+//! crate's `jpeg` feature) without its SIMD paths and in strict mode, so
+//! every machine gets the same texels and a truncated or corrupt file is
+//! an error, not a grey patch.
 
 use std::path::{Path, PathBuf};
 
@@ -27,7 +33,26 @@ pub struct Texture {
     has_alpha: bool,
     grey: bool,
     bit_depth: u8,
+    format: ImageFormat,
+    tint: Option<Rgb>,
 }
+
+/// The file format a texture was decoded from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ImageFormat {
+    /// PNG (8 or 16 bits, any colour type).
+    Png,
+    /// JPEG (baseline or progressive, 8 bits; grey, YCbCr, CMYK).
+    Jpeg,
+    /// Made in memory ([`Texture::from_texels`]).
+    Texels,
+}
+
+/// The PNG signature.
+const PNG_SIGNATURE: &[u8] = b"\x89PNG\r\n\x1a\n";
+
+/// JPEG's start-of-image marker and the first byte of the next marker.
+const JPEG_SOI: &[u8] = &[0xFF, 0xD8, 0xFF];
 
 /// A texel sample: colour and alpha (alpha is 1 for opaque images).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -49,6 +74,146 @@ pub struct TextureError {
 impl Texture {
     /// Largest accepted side in texels.
     pub const MAX_SIDE: u32 = crate::options::MAX_SIDE;
+
+    /// Decodes PNG or JPEG bytes (told apart by their first bytes) within
+    /// `budget`, as [`Texture::from_png_bytes_within`] and
+    /// [`Texture::from_jpeg_bytes_within`] do.
+    ///
+    /// # Errors
+    ///
+    /// [`TextureError`] when the bytes are neither, or as those functions.
+    pub fn from_bytes_within(
+        path: &Path,
+        bytes: &[u8],
+        budget: &crate::budget::Budget,
+    ) -> Result<Texture, TextureError> {
+        if bytes.starts_with(JPEG_SOI) {
+            Texture::from_jpeg_bytes_within(path, bytes, budget)
+        } else if bytes.starts_with(PNG_SIGNATURE) || !bytes.starts_with(&JPEG_SOI[..2]) {
+            // Anything that is not a JPEG is reported as PNG's decoder
+            // sees it (the message names what was expected).
+            Texture::from_png_bytes_within(path, bytes, budget).map_err(|e| {
+                if bytes.starts_with(PNG_SIGNATURE) {
+                    e
+                } else {
+                    TextureError {
+                        message: "not a PNG or JPEG image: it starts with neither signature".into(),
+                    }
+                }
+            })
+        } else {
+            Err(TextureError {
+                message: "not a readable JPEG: the file ends after its start-of-image marker"
+                    .into(),
+            })
+        }
+    }
+
+    /// [`Texture::from_bytes_within`] within the default memory budget.
+    ///
+    /// # Errors
+    ///
+    /// As [`Texture::from_bytes_within`].
+    pub fn from_bytes(path: &Path, bytes: &[u8]) -> Result<Texture, TextureError> {
+        Texture::from_bytes_within(path, bytes, &crate::budget::Budget::default())
+    }
+
+    /// Bytes the JPEG decoder holds per pixel while it decodes, at most:
+    /// its RGB output (3 B) and, for a progressive file, the i16
+    /// coefficients of three components (6 B).
+    const JPEG_DECODE_BYTES_PER_PIXEL: u64 = 9;
+
+    /// Decodes JPEG bytes: the header's size is checked against
+    /// [`Texture::MAX_SIDE`] and the texels reserved in `budget` before
+    /// anything is decoded (the decoder's own buffers are checked against
+    /// what is left), then the image is decoded in strict mode to RGB and
+    /// each sample divided by 255. JPEG has no alpha.
+    ///
+    /// # Errors
+    ///
+    /// [`TextureError`] for a file the decoder refuses (truncated, corrupt,
+    /// an unsupported coding such as arithmetic), a side beyond
+    /// [`Texture::MAX_SIDE`], or a figure that does not fit the budget.
+    pub fn from_jpeg_bytes_within(
+        path: &Path,
+        bytes: &[u8],
+        budget: &crate::budget::Budget,
+    ) -> Result<Texture, TextureError> {
+        use zune_jpeg::zune_core::bytestream::ZCursor;
+        use zune_jpeg::zune_core::colorspace::ColorSpace;
+        use zune_jpeg::zune_core::options::DecoderOptions;
+        let err = |m: String| TextureError { message: m };
+        // JPEG's own limit is 65535 a side: the header is read whatever it
+        // says, and the side checked here with the PNG's message.
+        let options = DecoderOptions::new_safe()
+            .set_strict_mode(true)
+            .set_max_width(usize::from(u16::MAX))
+            .set_max_height(usize::from(u16::MAX))
+            .jpeg_set_out_colorspace(ColorSpace::RGB);
+        let mut dec = zune_jpeg::JpegDecoder::new_with_options(ZCursor::new(bytes), options);
+        // The decoder's messages may end in a newline.
+        let words = |e: zune_jpeg::errors::DecodeErrors| e.to_string().trim().to_string();
+        dec.decode_headers()
+            .map_err(|e| err(format!("not a readable JPEG: {}", words(e))))?;
+        let (w, h) = dec
+            .dimensions()
+            .ok_or_else(|| err("not a readable JPEG: no frame header".into()))?;
+        let side = |v: usize| u32::try_from(v).unwrap_or(u32::MAX);
+        let (w, h) = (side(w), side(h));
+        if w == 0 || h == 0 || w > Self::MAX_SIDE || h > Self::MAX_SIDE {
+            return Err(err(format!(
+                "image is {w}x{h}; each side must be 1 … {}",
+                Self::MAX_SIDE
+            )));
+        }
+        let texels = u64::from(w) * u64::from(h);
+        budget
+            .reserve(texels * Self::BYTES_PER_TEXEL, || {
+                format!("the {w}x{h} texture's texels")
+            })
+            .map_err(|e| err(e.to_string()))?;
+        let decoded = (|| {
+            budget
+                .check(texels * Self::JPEG_DECODE_BYTES_PER_PIXEL, || {
+                    format!("decoding the {w}x{h} texture")
+                })
+                .map_err(|e| e.to_string())?;
+            let rgb = dec
+                .decode()
+                .map_err(|e| format!("not a readable JPEG: {}", words(e)))?;
+            let n = (w as usize) * (h as usize);
+            if rgb.len() < 3 * n {
+                return Err(format!(
+                    "not a readable JPEG: {} bytes decoded for {w}x{h} RGB pixels",
+                    rgb.len()
+                ));
+            }
+            Ok(rgb[..3 * n]
+                .chunks_exact(3)
+                .map(|p| {
+                    let v = |b: u8| f32::from(b) / 255.0;
+                    [v(p[0]), v(p[1]), v(p[2]), 1.0]
+                })
+                .collect::<Vec<[f32; 4]>>())
+        })();
+        match decoded {
+            Ok(texels) => Ok(Texture {
+                path: path.to_path_buf(),
+                width: w,
+                height: h,
+                texels,
+                has_alpha: false,
+                grey: false,
+                bit_depth: 8,
+                format: ImageFormat::Jpeg,
+                tint: None,
+            }),
+            Err(m) => {
+                budget.release(texels * Self::BYTES_PER_TEXEL);
+                Err(err(m))
+            }
+        }
+    }
 
     /// Decodes PNG bytes; `path` names the file in errors and exports.
     ///
@@ -171,10 +336,12 @@ impl Texture {
             has_alpha,
             grey,
             bit_depth: if sixteen { 16 } else { 8 },
+            format: ImageFormat::Png,
+            tint: None,
         })
     }
 
-    /// Reads and decodes a PNG file.
+    /// Reads and decodes a PNG or JPEG file.
     ///
     /// # Errors
     ///
@@ -183,7 +350,7 @@ impl Texture {
         let bytes = crate::input::read_file(path).map_err(|e| TextureError {
             message: format!("could not read: {e}"),
         })?;
-        Texture::from_png_bytes(path, &bytes)
+        Texture::from_bytes(path, &bytes)
     }
 
     /// A texture from texels (row-major from the top row), for tests and
@@ -205,7 +372,48 @@ impl Texture {
             has_alpha,
             grey: false,
             bit_depth: 16,
+            format: ImageFormat::Texels,
+            tint: None,
         }
+    }
+
+    /// The same image with every texel's colour multiplied by `tint`
+    /// (alpha unchanged): an OBJ material's `Kd` colour on its `map_Kd`
+    /// (`scene::mtl`). Each channel of `tint` must lie in [0, 1], so the
+    /// texels stay in [0, 1].
+    ///
+    /// # Panics
+    ///
+    /// If a channel of `tint` is outside [0, 1] (or NaN).
+    #[must_use]
+    pub fn tinted(&self, tint: Rgb) -> Texture {
+        let t = [tint.r, tint.g, tint.b];
+        assert!(t.iter().all(|c| (0.0..=1.0).contains(c)), "tint {t:?}");
+        let texels = self
+            .texels
+            .iter()
+            .map(|x| [x[0] * t[0], x[1] * t[1], x[2] * t[2], x[3]])
+            .collect();
+        let before = self.tint.unwrap_or(Rgb::WHITE);
+        Texture {
+            texels,
+            tint: Some(Rgb::new(before.r * t[0], before.g * t[1], before.b * t[2])),
+            grey: self.grey && t[0] == t[1] && t[1] == t[2],
+            ..self.clone()
+        }
+    }
+
+    /// The format the texels were decoded from.
+    #[must_use]
+    pub fn format(&self) -> ImageFormat {
+        self.format
+    }
+
+    /// The colour the file's texels were multiplied by ([`Texture::tinted`]),
+    /// if any: the texels are then not the file's.
+    #[must_use]
+    pub fn tint(&self) -> Option<Rgb> {
+        self.tint
     }
 
     /// The file the texture came from.
@@ -342,6 +550,47 @@ mod tests {
             t.sample(Vec2::new(3.25, -1.75)),
             t.sample(Vec2::new(0.25, 0.25))
         );
+    }
+
+    fn jpeg() -> Vec<u8> {
+        let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/obj/mtl/tiles.jpg");
+        std::fs::read(p).unwrap()
+    }
+
+    #[test]
+    fn jpeg_texels_are_linear_codes_and_cut_files_are_errors() {
+        let t = Texture::from_bytes(Path::new("t.jpg"), &jpeg()).unwrap();
+        assert_eq!(
+            (t.width(), t.height(), t.format()),
+            (16, 16, ImageFormat::Jpeg)
+        );
+        assert!(!t.has_alpha());
+        for x in t.texels() {
+            for &c in &x[..3] {
+                let code = c * 255.0;
+                assert!((code - code.round()).abs() < 1e-3, "{c} is not v/255");
+            }
+            assert_eq!(x[3], 1.0);
+        }
+        // Cut anywhere inside its scans: an error, never a grey patch.
+        let j = jpeg();
+        for keep in [j.len() / 3, j.len() / 2, j.len() - 40] {
+            let e = Texture::from_bytes(Path::new("t.jpg"), &j[..keep]).unwrap_err();
+            assert!(
+                e.message.starts_with("not a readable JPEG: "),
+                "{keep}: {e}"
+            );
+        }
+        let e = Texture::from_bytes(Path::new("t.jpg"), &[0xFF, 0xD8]).unwrap_err();
+        assert!(e.message.contains("JPEG"), "{e}");
+    }
+
+    #[test]
+    fn a_tint_multiplies_the_colour_and_keeps_alpha() {
+        let t = checker().tinted(Rgb::new(0.5, 1.0, 0.25));
+        assert_eq!(t.texels()[3], [0.5, 1.0, 0.25, 1.0]);
+        assert_eq!(t.tint(), Some(Rgb::new(0.5, 1.0, 0.25)));
+        assert_eq!(checker().tint(), None);
     }
 
     #[test]

@@ -35,7 +35,10 @@ pub struct ObjectInfo {
     pub closed: bool,
     /// Casts no shadows.
     pub no_shadow: bool,
-    /// Material index.
+    /// Material index: the object's material, or, for an object whose
+    /// triangles have materials of their own (an OBJ's, `material =
+    /// "obj"`), the one whose `ior` is its inside; the triangles' are in
+    /// [`TriScene::tri_material`] ([`TriScene::object_materials`]).
     pub material: u16,
     /// Uses interpolated vertex normals.
     pub smooth: bool,
@@ -115,6 +118,23 @@ pub enum Prim {
 }
 
 impl TriScene {
+    /// The materials object `object`'s triangles use, each once, in index
+    /// order (an OBJ mesh with `material = "obj"` has several; every other
+    /// object one, [`ObjectInfo::material`]).
+    #[must_use]
+    pub fn object_materials(&self, object: usize) -> Vec<u16> {
+        let info = &self.objects[object];
+        let mut m: Vec<u16> = self
+            .tri_material
+            .get(info.tris.start as usize..info.tris.end as usize)
+            .unwrap_or_default()
+            .to_vec();
+        m.push(info.material);
+        m.sort_unstable();
+        m.dedup();
+        m
+    }
+
     /// The shading context of this scene's materials and lights, with the
     /// gate half-width `gate_eps` and shadow rays on or off.
     #[must_use]

@@ -174,7 +174,12 @@ fn decide_ray_tree(scene: &TriScene, max_depth: u32) -> (bool, Decision) {
         .iter()
         .enumerate()
         .filter(|(i, m)| {
-            m.spawns_rays() && scene.objects.iter().any(|o| usize::from(o.material) == *i)
+            m.spawns_rays()
+                && (0..scene.objects.len()).any(|o| {
+                    scene
+                        .object_materials(o)
+                        .contains(&u16::try_from(*i).unwrap_or(u16::MAX))
+                })
         })
         .map(|(_, m)| m.name.as_str())
         .collect();
@@ -305,9 +310,13 @@ fn decide_backface_cull(scene: &TriScene) -> (Vec<bool>, Decision) {
     let backface_cull: Vec<bool> = scene
         .objects
         .iter()
-        .map(|o| {
-            let m = &scene.materials[usize::from(o.material)];
-            o.closed && !m.is_transparent() && !near_rect_touches(scene, o.bounds)
+        .enumerate()
+        .map(|(k, o)| {
+            let opaque = scene
+                .object_materials(k)
+                .iter()
+                .all(|&m| !scene.materials[usize::from(m)].is_transparent());
+            o.closed && opaque && !near_rect_touches(scene, o.bounds)
         })
         .collect();
     let bf = backface_cull.iter().filter(|c| **c).count();

@@ -114,6 +114,9 @@ struct Piece {
     tri_uvs: Vec<[u32; 3]>,
     smooth: bool,
     segments: Option<u32>,
+    /// Per triangle, its material (a mesh with `material = "obj"`); `None`:
+    /// the object's material for all.
+    tri_materials: Option<std::sync::Arc<[u16]>>,
 }
 
 /// Largest singular value of a 3×3 matrix (power iteration on MᵀM).
@@ -653,6 +656,7 @@ pub fn tessellate_within(
         bounds: Aabb::EMPTY,
         warnings: Vec::new(),
     };
+    out.warnings.extend(scene.warnings.iter().cloned());
     if scene.lights.is_empty() {
         out.warnings.push(format!(
             "{}: no lights: only ambient and emission light the scene",
@@ -752,13 +756,21 @@ fn check_uv_precision(
     piece: &Piece,
     warnings: &mut Vec<String>,
 ) -> Result<(), LoadError> {
-    let m = &scene.materials[usize::from(obj.material)];
+    // The largest texture of the object's materials (and that material).
     let mut side = 0u32;
-    if let rendiff_core::shade::Pigment::Image(t) = &m.pigment {
-        side = side.max(t.width()).max(t.height());
-    }
-    if let Some(b) = &m.bump {
-        side = side.max(b.texture.width()).max(b.texture.height());
+    let mut m = &scene.materials[usize::from(obj.material)];
+    for k in object_materials(obj, piece) {
+        let mat = &scene.materials[usize::from(k)];
+        let mut s = 0u32;
+        if let rendiff_core::shade::Pigment::Image(t) = &mat.pigment {
+            s = s.max(t.width()).max(t.height());
+        }
+        if let Some(b) = &mat.bump {
+            s = s.max(b.texture.width()).max(b.texture.height());
+        }
+        if s > side {
+            (side, m) = (s, mat);
+        }
     }
     if side == 0 {
         return Ok(());
@@ -940,9 +952,15 @@ fn object_piece(
             budget.add(piece.tris.len() as u64, scene, &obj.label())?;
             piece
         }
-        Shape::Mesh { data, smooth } => {
+        Shape::Mesh {
+            data,
+            smooth,
+            face_materials,
+        } => {
             budget.add(data.triangles.len() as u64, scene, &obj.label())?;
-            mesh_piece(data, *smooth)
+            let mut p = mesh_piece(data, *smooth);
+            p.tri_materials.clone_from(face_materials);
+            p
         }
     })
 }
@@ -1103,15 +1121,36 @@ fn orient_outward(welded: &[Vec3], tris: &mut [[u32; 3]], piece: &mut Piece) {
     }
 }
 
+/// The materials an object's piece uses, each once: its triangles' (a
+/// mesh with per-face materials), else the object's.
+fn object_materials(obj: &Object, piece: &Piece) -> Vec<u16> {
+    match &piece.tri_materials {
+        Some(m) => {
+            let mut v = m.to_vec();
+            v.sort_unstable();
+            v.dedup();
+            v
+        }
+        None => vec![obj.material],
+    }
+}
+
 /// Rejects a refracting material on an object that is not closed, since
 /// refraction needs an inside.
 fn check_refraction_needs_closed(
     scene: &Scene,
     obj: &Object,
+    piece: &Piece,
     closed: bool,
 ) -> Result<(), LoadError> {
-    let material = &scene.materials[usize::from(obj.material)];
-    if material.ior != 1.0 && material.is_transparent() && !closed {
+    let refracting = object_materials(obj, piece).into_iter().find(|&k| {
+        let m = &scene.materials[usize::from(k)];
+        m.ior != 1.0 && m.is_transparent()
+    });
+    if let Some(k) = refracting
+        && !closed
+    {
+        let material = &scene.materials[usize::from(k)];
         return Err(LoadError::Key {
             path: scene.path.clone(),
             loc: obj.loc,
@@ -1219,7 +1258,8 @@ fn push_triangles(
         } else {
             tu.map(|i| i + bases.uv)
         });
-        out.tri_material.push(obj.material);
+        out.tri_material
+            .push(piece.tri_materials.as_ref().map_or(obj.material, |m| m[k]));
         out.tri_object.push(object_id);
     }
     bounds
@@ -1270,7 +1310,7 @@ fn append(
     if closed {
         orient_outward(&welded, &mut tris, &mut piece);
     }
-    check_refraction_needs_closed(scene, obj, closed)?;
+    check_refraction_needs_closed(scene, obj, &piece, closed)?;
 
     let (normal_base, computed_base) = push_normals(obj, &piece, &welded, &tris, out);
     let bases = Bases {

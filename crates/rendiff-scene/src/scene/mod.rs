@@ -9,6 +9,7 @@
 //! module re-checks what is checked here.
 
 mod error;
+pub mod mtl;
 pub mod obj;
 mod reader;
 
@@ -169,6 +170,10 @@ pub enum Shape {
         data: Arc<MeshData>,
         /// Interpolate vertex normals.
         smooth: bool,
+        /// With `material = "obj"`: the material (an index into
+        /// [`Scene::materials`]) of each of the mesh's triangles, from its
+        /// face's `usemtl`; `None`: the object's `material` for all.
+        face_materials: Option<Arc<[u16]>>,
     },
     /// A sphere.
     Sphere {
@@ -218,7 +223,9 @@ pub struct Object {
     pub loc: Loc,
     /// The geometry.
     pub shape: Shape,
-    /// Material index.
+    /// Material index: the object's material; for a mesh with per-face
+    /// materials (`material = "obj"`), the one whose `ior` is its inside
+    /// (its first refracting material, else its first face's).
     pub material: u16,
     /// The transform steps as written.
     pub steps: Vec<TransformStep>,
@@ -262,7 +269,8 @@ pub struct Scene {
     pub render: RenderSettings,
     /// `[[lights]]`.
     pub lights: Vec<Light>,
-    /// `[materials]`, in name order.
+    /// `[materials]`, in name order, then the materials read from OBJ
+    /// libraries (`material = "obj"`) in order of first use.
     pub materials: Vec<Material>,
     /// `[[objects]]`.
     pub objects: Vec<Object>,
@@ -272,7 +280,15 @@ pub struct Scene {
     pub ray: RaySettings,
     /// `[tolerance]`.
     pub tolerance: ToleranceSettings,
+    /// What loading noticed and let pass (statements of a material library
+    /// that the finish model has no place for).
+    pub warnings: Vec<String>,
 }
+
+/// The `material` value that selects an OBJ mesh's own materials (its
+/// `.mtl` libraries, per `usemtl` group); no `[materials]` entry may have
+/// this name.
+pub const OBJ_MATERIALS: &str = "obj";
 
 /// Why [`Scene::scaled`] cannot scale a scene.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
@@ -578,6 +594,10 @@ impl Scene {
             textures: HashMap::new(),
             meshes: HashMap::new(),
             budget,
+            libraries: HashMap::new(),
+            library_materials: HashMap::new(),
+            default_obj_material: None,
+            warnings: Vec::new(),
         }
         .scene(&root)
     }
@@ -595,6 +615,13 @@ struct Loader<'b> {
     textures: HashMap<PathBuf, Arc<Texture>>,
     meshes: HashMap<PathBuf, Arc<MeshData>>,
     budget: &'b Budget,
+    /// Material libraries by canonical path.
+    libraries: HashMap<PathBuf, Arc<mtl::MtlLibrary>>,
+    /// Library materials already mapped: (canonical library, name) → index.
+    library_materials: HashMap<(PathBuf, String), u16>,
+    /// The material of faces no `usemtl` names, once made.
+    default_obj_material: Option<u16>,
+    warnings: Vec<String>,
 }
 
 /// Why an input file could not be read within the budget.
@@ -698,30 +725,347 @@ impl Loader<'_> {
                 format!("could not read image {}: {e}", path.display()),
             )
         };
+        let decode_err = |message: String| LoadError::Image {
+            path: path.clone(),
+            message,
+        };
+        self.texture_at(&path, &read_err, &decode_err)
+    }
+
+    /// The texture at `path` (PNG or JPEG), loaded once per canonical path
+    /// within the budget; `read_err` words a file that cannot be read,
+    /// `decode_err` one that cannot be decoded or does not fit.
+    fn texture_at(
+        &mut self,
+        path: &Path,
+        read_err: &dyn Fn(std::io::Error) -> LoadError,
+        decode_err: &dyn Fn(String) -> LoadError,
+    ) -> Result<Arc<Texture>, LoadError> {
         // One image named two ways (`a.png`, `./a.png`, a link) is one
         // texture: the cache key is its canonical path.
-        let canonical = std::fs::canonicalize(&path).map_err(read_err)?;
+        let canonical = std::fs::canonicalize(path).map_err(read_err)?;
         if let Some(tex) = self.textures.get(&canonical) {
             return Ok(tex.clone());
         }
-        let bytes = self.read_within(&path, "image").map_err(|e| match e {
+        let bytes = self.read_within(path, "image").map_err(|e| match e {
             ReadError::Io(e) => read_err(e),
-            ReadError::Budget(e) => LoadError::Image {
-                path: path.clone(),
-                message: e.to_string(),
-            },
+            ReadError::Budget(e) => decode_err(e.to_string()),
         })?;
-        let tex = Texture::from_png_bytes_within(&path, &bytes, self.budget).map_err(|e| {
-            LoadError::Image {
-                path: path.clone(),
-                message: e.message,
-            }
-        })?;
+        let tex = Texture::from_bytes_within(path, &bytes, self.budget)
+            .map_err(|e| decode_err(e.message))?;
         // The file's bytes are freed once decoded.
         self.budget.release(bytes.len() as u64);
         let tex = Arc::new(tex);
         self.textures.insert(canonical, tex.clone());
         Ok(tex)
+    }
+
+    /// A material library named by an OBJ's `mtllib` (relative to the
+    /// OBJ's folder, [`mtl::asset_path`]), read once per canonical path.
+    fn library(&mut self, obj: &Path, lib: &obj::Named) -> Result<Arc<mtl::MtlLibrary>, LoadError> {
+        let at = |message: String| LoadError::Mesh {
+            path: obj.to_path_buf(),
+            line: Some(lib.line as usize),
+            message,
+        };
+        let base = obj.parent().unwrap_or(Path::new(""));
+        // `mtllib a.mtl b.mtl` names two libraries, but a name with spaces
+        // is one: the whole name is taken where such a file exists.
+        let path = mtl::asset_path(base, &lib.name).map_err(|m| at(format!("mtllib: {m}")))?;
+        let read_err = |e: std::io::Error| {
+            at(format!(
+                "could not read the material library {}: {e}",
+                path.display()
+            ))
+        };
+        let canonical = std::fs::canonicalize(&path).map_err(read_err)?;
+        if let Some(l) = self.libraries.get(&canonical) {
+            return Ok(l.clone());
+        }
+        let bytes = self
+            .read_within(&path, "material library")
+            .map_err(|e| match e {
+                ReadError::Io(e) => read_err(e),
+                ReadError::Budget(e) => at(e.to_string()),
+            })?;
+        let parsed = mtl::parse(&path, &bytes);
+        self.budget.release(bytes.len() as u64);
+        let parsed = Arc::new(parsed?);
+        if !parsed.ignored.is_empty() {
+            let list: Vec<String> = parsed
+                .ignored
+                .iter()
+                .take(8)
+                .map(|s| format!("{} (line {})", s.value, s.line))
+                .collect();
+            self.warnings.push(format!(
+                "{}: {} statement(s) that rendiff does not model were ignored: {}{}",
+                path.display(),
+                parsed.ignored.len(),
+                list.join(", "),
+                if parsed.ignored.len() > 8 {
+                    ", …"
+                } else {
+                    ""
+                }
+            ));
+        }
+        self.libraries.insert(canonical, parsed.clone());
+        Ok(parsed)
+    }
+
+    /// The libraries an OBJ names: each `mtllib` (a line naming several
+    /// files that do not exist as one name is split at its spaces).
+    fn libraries_of(&mut self, data: &MeshData) -> Result<Vec<Arc<mtl::MtlLibrary>>, LoadError> {
+        let base = data.path.parent().unwrap_or(Path::new(""));
+        let mut out: Vec<Arc<mtl::MtlLibrary>> = Vec::new();
+        for lib in &data.mtllibs {
+            let whole = mtl::asset_path(base, &lib.name).is_ok_and(|p| p.is_file());
+            let names: Vec<obj::Named> = if whole || !lib.name.contains(char::is_whitespace) {
+                vec![lib.clone()]
+            } else {
+                lib.name
+                    .split_whitespace()
+                    .map(|n| obj::Named {
+                        name: n.to_string(),
+                        line: lib.line,
+                    })
+                    .collect()
+            };
+            for n in &names {
+                let l = self.library(&data.path, n)?;
+                if !out.iter().any(|o| Arc::ptr_eq(o, &l)) {
+                    out.push(l);
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    /// `material = "obj"`: the mesh's own materials. Reads the OBJ's
+    /// libraries, maps every material a `usemtl` names
+    /// ([`mtl::to_material`], each once per library and name, appended to
+    /// `materials`), gives faces before any `usemtl` the default
+    /// ([`mtl::default_material`]), and checks what the scene's own
+    /// materials are checked for: uvs on the faces whose material reads an
+    /// image, one index of refraction per object. Returns each triangle's
+    /// material and the object's primary one ([`Object::material`]).
+    fn obj_materials(
+        &mut self,
+        t: &Table<'_, '_>,
+        mat_name: &At<String>,
+        data: &MeshData,
+        materials: &mut Vec<Material>,
+    ) -> Result<(Arc<[u16]>, u16), LoadError> {
+        if data.mtllibs.is_empty() {
+            return Err(t.err(
+                &mat_name.span,
+                "material",
+                format!(
+                    "material = \"{OBJ_MATERIALS}\" uses the mesh's own materials, but {} has no `mtllib` statement naming a material library",
+                    data.path.display()
+                ),
+            ));
+        }
+        let libs = self.libraries_of(data)?;
+        // Each name once across the libraries.
+        let mut defined: HashMap<&str, (usize, usize)> = HashMap::new();
+        for (li, l) in libs.iter().enumerate() {
+            for (mi, m) in l.materials.iter().enumerate() {
+                if let Some(&(lj, mj)) = defined.get(m.name.as_str()) {
+                    let first = &libs[lj];
+                    return Err(LoadError::Mesh {
+                        path: l.path.clone(),
+                        line: Some(m.line as usize),
+                        message: format!(
+                            "material `{}` is also defined in {}:{}; the libraries of one OBJ must name each material once",
+                            obj::shown(&m.name),
+                            first.path.display(),
+                            first.materials[mj].line
+                        ),
+                    });
+                }
+                defined.insert(&m.name, (li, mi));
+            }
+        }
+        let mut used: Vec<u16> = Vec::with_capacity(data.usemtl.len());
+        for u in &data.usemtl {
+            let Some(&(li, mi)) = defined.get(u.name.as_str()) else {
+                let mut names: Vec<String> = libs
+                    .iter()
+                    .flat_map(|l| {
+                        l.materials
+                            .iter()
+                            .map(|m| format!("`{}`", obj::shown(&m.name)))
+                    })
+                    .collect();
+                if names.is_empty() {
+                    names.push("none".into());
+                }
+                let files: Vec<String> = libs
+                    .iter()
+                    .map(|l| {
+                        l.path
+                            .file_name()
+                            .map_or_else(String::new, |f| f.to_string_lossy().into_owned())
+                    })
+                    .collect();
+                return Err(LoadError::Mesh {
+                    path: data.path.clone(),
+                    line: Some(u.line as usize),
+                    message: format!(
+                        "usemtl `{}`: no material of that name in {} (defined: {})",
+                        obj::shown(&u.name),
+                        files.join(", "),
+                        names.join(", ")
+                    ),
+                });
+            };
+            used.push(self.library_material(&libs[li], mi, materials)?);
+        }
+        let needs_default = data.tri_usemtl.is_empty() || data.tri_usemtl.contains(&obj::NO_USEMTL);
+        let default = if needs_default {
+            Some(match self.default_obj_material {
+                Some(d) => d,
+                None => {
+                    let d = Self::push_material(
+                        materials,
+                        mtl::default_material("obj: no usemtl".to_string()),
+                        t,
+                    )?;
+                    self.default_obj_material = Some(d);
+                    d
+                }
+            })
+        } else {
+            None
+        };
+        let faces: Vec<u16> = if data.tri_usemtl.is_empty() {
+            vec![default.unwrap_or(0); data.triangles.len()]
+        } else {
+            data.tri_usemtl
+                .iter()
+                .map(|&u| {
+                    if u == obj::NO_USEMTL {
+                        default.unwrap_or(0)
+                    } else {
+                        used[u as usize]
+                    }
+                })
+                .collect()
+        };
+        // An image needs uvs on every face of its material.
+        for ((tri, &m), &line) in data.triangles.iter().zip(&faces).zip(&data.lines) {
+            let mat = &materials[usize::from(m)];
+            if tri.t.is_none() && mat.needs_uv() {
+                return Err(LoadError::Mesh {
+                    path: data.path.clone(),
+                    line: Some(line as usize),
+                    message: format!(
+                        "this face has no uv (vt) on every corner, but its material \"{}\" uses an image (map_Kd or bump)",
+                        mat.name
+                    ),
+                });
+            }
+        }
+        // One inside per object (as POV-Ray's `interior`): where one of
+        // its transparent materials refracts, all of them refract alike.
+        let mut distinct: Vec<u16> = faces.clone();
+        distinct.sort_unstable();
+        distinct.dedup();
+        let transparent: Vec<u16> = distinct
+            .iter()
+            .copied()
+            .filter(|&m| materials[usize::from(m)].is_transparent())
+            .collect();
+        let refracting = transparent
+            .iter()
+            .copied()
+            .find(|&m| materials[usize::from(m)].ior != 1.0);
+        if let Some(r) = refracting
+            && let Some(other) = transparent
+                .iter()
+                .find(|&&m| materials[usize::from(m)].ior != materials[usize::from(r)].ior)
+        {
+            let (a, b) = (&materials[usize::from(r)], &materials[usize::from(*other)]);
+            return Err(t.err(
+                &mat_name.span,
+                "material",
+                format!(
+                    "the mesh's transparent materials \"{}\" (ior {}) and \"{}\" (ior {}) differ in their index of refraction; an object has one inside, so its transparent materials share one (illum 6 or 7 and Ni on all, or on none)",
+                    a.name, a.ior, b.name, b.ior
+                ),
+            ));
+        }
+        let primary = refracting.unwrap_or(faces[0]);
+        Ok((faces.into(), primary))
+    }
+
+    /// Appends a material, refusing more than u16 can index.
+    fn push_material(
+        materials: &mut Vec<Material>,
+        m: Material,
+        t: &Table<'_, '_>,
+    ) -> Result<u16, LoadError> {
+        let k = u16::try_from(materials.len())
+            .ok()
+            .filter(|&k| k < u16::MAX)
+            .ok_or_else(|| t.err_here("material", "too many materials (at most 65535, the scene's and the OBJ libraries' together)"))?;
+        materials.push(m);
+        Ok(k)
+    }
+
+    /// The scene material of material `mi` of library `lib`: mapped once,
+    /// with its textures (relative to the library's folder) loaded.
+    fn library_material(
+        &mut self,
+        lib: &Arc<mtl::MtlLibrary>,
+        mi: usize,
+        materials: &mut Vec<Material>,
+    ) -> Result<u16, LoadError> {
+        let m = &lib.materials[mi];
+        let key = (lib.path.clone(), m.name.clone());
+        if let Some(&k) = self.library_materials.get(&key) {
+            return Ok(k);
+        }
+        let base = lib.path.parent().unwrap_or(Path::new("")).to_path_buf();
+        let mut load = |s: &mtl::TexStatement, kw: &str| -> Result<Arc<Texture>, LoadError> {
+            let at = |message: String| LoadError::Mesh {
+                path: lib.path.clone(),
+                line: Some(s.line as usize),
+                message,
+            };
+            let path = mtl::asset_path(&base, &s.file).map_err(|m| at(format!("{kw}: {m}")))?;
+            let read_err = |e: std::io::Error| {
+                at(format!(
+                    "{kw}: could not read image {}: {e}",
+                    path.display()
+                ))
+            };
+            let decode_err = |e: String| at(format!("{kw}: image {}: {e}", path.display()));
+            self.texture_at(&path, &read_err, &decode_err)
+        };
+        let tex = mtl::Textures {
+            map_kd: m.map_kd.as_ref().map(|s| load(s, "map_Kd")).transpose()?,
+            bump: m.bump.as_ref().map(|s| load(s, "bump")).transpose()?,
+        };
+        let file = lib
+            .path
+            .file_name()
+            .map_or_else(String::new, |f| f.to_string_lossy().into_owned());
+        let name = format!("{file}:{}", m.name);
+        let mapped = mtl::to_material(lib, m, name, &tex, self.budget)?;
+        let k = u16::try_from(materials.len())
+            .ok()
+            .filter(|&k| k < u16::MAX)
+            .ok_or_else(|| LoadError::Mesh {
+                path: lib.path.clone(),
+                line: Some(m.line as usize),
+                message: "too many materials (at most 65535, the scene's and the OBJ libraries' together)".into(),
+            })?;
+        materials.push(mapped);
+        self.library_materials.insert(key, k);
+        Ok(k)
     }
 
     fn scene(mut self, root: &Table<'_, '_>) -> Result<Scene, LoadError> {
@@ -730,8 +1074,8 @@ impl Loader<'_> {
         let camera = self.camera(root, &image)?;
         let render = self.render(root)?;
         let lights = self.lights(root)?;
-        let (materials, names) = self.materials(root)?;
-        let objects = self.objects(root, &materials, &names)?;
+        let (mut materials, names) = self.materials(root)?;
+        let objects = self.objects(root, &mut materials, &names)?;
         let raster = self.raster(root)?;
         let ray = self.ray(root)?;
         let tolerance = self.tolerance(root)?;
@@ -757,6 +1101,7 @@ impl Loader<'_> {
             raster,
             ray,
             tolerance,
+            warnings: self.warnings,
         })
     }
 
@@ -1185,6 +1530,16 @@ impl Loader<'_> {
                 ));
             };
             let m = Table::new(root.source(), format!("materials.{name}"), mt, value.span());
+            if name == OBJ_MATERIALS {
+                return Err(LoadError::key(
+                    root.path(),
+                    root.loc(&key.span()),
+                    format!("materials.{name}"),
+                    format!(
+                        "the name \"{OBJ_MATERIALS}\" is reserved: `material = \"{OBJ_MATERIALS}\"` gives a mesh its OBJ file's own materials; rename this material"
+                    ),
+                ));
+            }
             out.push(self.material(&m, name)?);
             names.push(name.to_string());
         }
@@ -1388,7 +1743,7 @@ impl Loader<'_> {
     fn objects(
         &mut self,
         root: &Table<'_, '_>,
-        materials: &[Material],
+        materials: &mut Vec<Material>,
         names: &[String],
     ) -> Result<Vec<Object>, LoadError> {
         let Some((arr, _)) = root.array("objects")? else {
@@ -1469,19 +1824,46 @@ impl Loader<'_> {
         &mut self,
         t: &Table<'_, '_>,
         index: usize,
-        materials: &[Material],
+        materials: &mut Vec<Material>,
         names: &[String],
     ) -> Result<Object, LoadError> {
         let kind = t.req_string("kind")?;
         let mat_name = t.req_string("material")?;
-        let material = Self::material_index(t, &mat_name, names)?;
+        let own = mat_name.value == OBJ_MATERIALS;
+        let material = if own {
+            0
+        } else {
+            Self::material_index(t, &mat_name, names)?
+        };
         let (steps, transform) = self.transform(t)?;
         let no_shadow = t.bool("no_shadow")?.is_some_and(|b| b.value);
         let tess = t.int("tessellation")?;
-        let shape = self.shape(t, &kind)?;
+        let mut shape = self.shape(t, &kind)?;
         let tessellation = Self::tessellation(t, tess, &shape)?;
         t.finish()?;
-        Self::check_material_fits(t, &materials[material], &mat_name, &shape)?;
+        let material = if own {
+            let Shape::Mesh {
+                data,
+                face_materials,
+                ..
+            } = &mut shape
+            else {
+                return Err(t.err(
+                    &mat_name.span,
+                    "material",
+                    format!(
+                        "material = \"{OBJ_MATERIALS}\" gives a mesh its OBJ file's own materials; this object is a {}",
+                        shape.kind()
+                    ),
+                ));
+            };
+            let (faces, primary) = self.obj_materials(t, &mat_name, data, materials)?;
+            *face_materials = Some(faces);
+            usize::from(primary)
+        } else {
+            Self::check_material_fits(t, &materials[material], &mat_name, &shape)?;
+            material
+        };
         let loc = t.start();
         #[expect(
             clippy::cast_possible_truncation,
@@ -1570,7 +1952,11 @@ impl Loader<'_> {
             self.meshes.insert(canonical, d.clone());
             d
         };
-        Ok(Shape::Mesh { data, smooth })
+        Ok(Shape::Mesh {
+            data,
+            smooth,
+            face_materials: None,
+        })
     }
 
     /// `kind = "sphere"`: `center` and `radius`.

@@ -14,6 +14,11 @@
 //! its uv list with the file's first uv (tobj's stand-in for the missing
 //! one); normals alike. Faces without a uv (or a normal) on every corner
 //! get none.
+//!
+//! `mtllib` and `usemtl` are recorded (names and lines), not resolved:
+//! only an object that asks for the file's own materials (`material =
+//! "obj"`) reads its libraries (`scene::mtl`), so a missing `.mtl` does not
+//! stop a mesh rendered with a scene material.
 
 use std::path::{Path, PathBuf};
 
@@ -74,7 +79,30 @@ pub struct MeshData {
     pub lines: Vec<u32>,
     /// Number of faces in the file.
     pub faces: usize,
+    /// The `mtllib` statements, in file order.
+    pub mtllibs: Vec<Named>,
+    /// The material names `usemtl` selects, each once, in order of first
+    /// use (with that line).
+    pub usemtl: Vec<Named>,
+    /// Per triangle, its face's `usemtl` (an index into
+    /// [`MeshData::usemtl`]), [`NO_USEMTL`] for faces before the first
+    /// one; empty when the file has no `usemtl`.
+    pub tri_usemtl: Vec<u32>,
 }
+
+/// A name an OBJ statement gives (the rest of its line, trimmed: names
+/// may hold spaces) and the line.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Named {
+    /// The name (possibly empty: Blender writes `usemtl` and `newmtl` of a
+    /// material without a name).
+    pub name: String,
+    /// The line.
+    pub line: u32,
+}
+
+/// In [`MeshData::tri_usemtl`]: a face before any `usemtl`.
+pub const NO_USEMTL: u32 = u32::MAX;
 
 impl MeshData {
     /// `true` when every triangle has uvs.
@@ -103,7 +131,7 @@ fn mesh_err(path: &Path, line: usize, message: impl Into<String>) -> LoadError {
 }
 
 /// A number of the file, or what is wrong with it.
-fn parse_f32(tok: &str) -> Result<f32, String> {
+pub(super) fn parse_f32(tok: &str) -> Result<f32, String> {
     match tok.parse::<f32>() {
         Ok(v) if v.is_finite() => Ok(v),
         parsed => match tok.parse::<f64>() {
@@ -120,12 +148,12 @@ fn parse_f32(tok: &str) -> Result<f32, String> {
 }
 
 /// A token as shown in a message: [`rendiff_core::escape::excerpt`].
-fn shown(tok: &str) -> String {
+pub(super) fn shown(tok: &str) -> String {
     rendiff_core::escape::excerpt(tok.as_bytes())
 }
 
 /// The lines of a text: `\n`, `\r\n` and a lone `\r` each end one.
-fn lines(text: &str) -> impl Iterator<Item = &str> {
+pub(super) fn lines(text: &str) -> impl Iterator<Item = &str> {
     let mut rest = text;
     std::iter::from_fn(move || {
         if rest.is_empty() {
@@ -151,7 +179,7 @@ fn lines(text: &str) -> impl Iterator<Item = &str> {
 /// Splits a line into `out` at white space (`char::is_whitespace`), up to
 /// a `#` (a comment starts anywhere), with one pass over the bytes for
 /// ASCII lines.
-fn tokenize<'a>(line: &'a str, out: &mut Vec<&'a str>) {
+pub(super) fn tokenize<'a>(line: &'a str, out: &mut Vec<&'a str>) {
     out.clear();
     // The ASCII characters `char::is_whitespace` accepts.
     let space = |b: u8| matches!(b, b' ' | b'\t' | b'\n' | 0x0B | 0x0C | b'\r');
@@ -379,6 +407,8 @@ struct Reader<'a> {
     /// Buffers for a face: its corners, and their indices in the mesh.
     corners: Vec<Corner>,
     indices: [Vec<u32>; 3],
+    /// The current `usemtl` ([`NO_USEMTL`] before the first).
+    current_mtl: u32,
 }
 
 impl Reader<'_> {
@@ -603,6 +633,7 @@ impl Reader<'_> {
         self.pending += copied;
 
         let number = u32::try_from(line).unwrap_or(u32::MAX);
+        let current_mtl = self.current_mtl;
         let push = |data: &mut MeshData, c: [usize; 3]| {
             data.triangles.push(MeshTri {
                 v: c.map(|k| v[k]),
@@ -610,6 +641,9 @@ impl Reader<'_> {
                 t: has_t.then(|| c.map(|k| t[k])),
             });
             data.lines.push(number);
+            if !data.usemtl.is_empty() {
+                data.tri_usemtl.push(current_mtl);
+            }
         };
         if corners.len() == 3 {
             push(&mut self.data, [0, 1, 2]);
@@ -666,9 +700,38 @@ impl Reader<'_> {
         self.model_corners = 0;
     }
 
-    fn statement(&mut self, line: usize, toks: &[&str]) -> Result<(), LoadError> {
+    /// `usemtl NAME`: the faces that follow use material NAME.
+    fn usemtl(&mut self, line: usize, name: &str) {
+        let line = u32::try_from(line).unwrap_or(u32::MAX);
+        let data = &mut self.data;
+        let k = match data.usemtl.iter().position(|n| n.name == name) {
+            Some(k) => k,
+            None => {
+                if data.usemtl.is_empty() {
+                    // The faces before the first usemtl had none.
+                    data.tri_usemtl = vec![NO_USEMTL; data.triangles.len()];
+                    self.pending += 4 * data.triangles.len() as u64;
+                }
+                data.usemtl.push(Named {
+                    name: name.to_string(),
+                    line,
+                });
+                data.usemtl.len() - 1
+            }
+        };
+        self.current_mtl = u32::try_from(k).unwrap_or(NO_USEMTL - 1);
+    }
+
+    /// One statement: `toks` are its words, `raw` the whole line.
+    fn statement(&mut self, line: usize, toks: &[&str], raw: &str) -> Result<(), LoadError> {
         let Some((&kw, args)) = toks.split_first() else {
             return Ok(());
+        };
+        // What follows the keyword up to a comment, trimmed (a name with
+        // spaces).
+        let rest = || {
+            let c = raw.find('#').map_or(raw, |i| &raw[..i]).trim_start();
+            c.get(kw.len()..).unwrap_or("").trim()
         };
         let named = |what: &str| -> Result<(), LoadError> {
             if args.is_empty() {
@@ -691,8 +754,16 @@ impl Reader<'_> {
                     self.end_model();
                 }
             }
-            "usemtl" => named("a material name")?,
-            "mtllib" => named("a file name")?,
+            // A material without a name (Blender writes `usemtl` alone for
+            // one) is the material named "" of the libraries.
+            "usemtl" => self.usemtl(line, rest()),
+            "mtllib" => {
+                named("a file name")?;
+                self.data.mtllibs.push(Named {
+                    name: rest().to_string(),
+                    line: u32::try_from(line).unwrap_or(u32::MAX),
+                });
+            }
             "s" => named("a smoothing group (a number, or `off`)")?,
             "l" | "p" => {}
             other => {
@@ -747,6 +818,9 @@ fn read(
             triangles: Vec::new(),
             lines: Vec::new(),
             faces: 0,
+            mtllibs: Vec::new(),
+            usemtl: Vec::new(),
+            tri_usemtl: Vec::new(),
         },
         model_faces: 0,
         model_corners: 0,
@@ -756,6 +830,7 @@ fn read(
         lines_since: 0,
         corners: Vec::new(),
         indices: [Vec::new(), Vec::new(), Vec::new()],
+        current_mtl: NO_USEMTL,
     };
     let mut toks: Vec<&str> = Vec::new();
     let mut last = 0;
@@ -763,7 +838,7 @@ fn read(
         for (k, raw) in lines(text).enumerate() {
             last = k + 1;
             tokenize(raw, &mut toks);
-            r.statement(last, &toks)?;
+            r.statement(last, &toks, raw)?;
         }
         r.end_model();
         if r.data.faces == 0 {
@@ -792,8 +867,11 @@ pub fn load_obj_bytes(path: &Path, bytes: &[u8]) -> Result<MeshData, LoadError> 
 /// Bytes a loaded mesh holds per position, normal, uv and triangle
 /// (`MeshData`'s arrays).
 pub(crate) fn mesh_bytes(d: &MeshData) -> u64 {
-    (d.positions.len() * 12 + d.normals.len() * 12 + d.uvs.len() * 8 + d.triangles.len() * 44)
-        as u64
+    (d.positions.len() * 12
+        + d.normals.len() * 12
+        + d.uvs.len() * 8
+        + d.triangles.len() * 44
+        + d.tri_usemtl.len() * 4) as u64
 }
 
 /// [`load_obj_bytes`] within `budget`: what the reader builds is reserved
@@ -1044,13 +1122,41 @@ mod tests {
         for (line, message) in [
             ("o", "`o` needs an object name"),
             ("g", "`g` needs a group name"),
-            ("usemtl", "`usemtl` needs a material name"),
             ("mtllib # a.mtl", "`mtllib` needs a file name"),
             ("s", "`s` needs a smoothing group (a number, or `off`)"),
         ] {
             let e = err(&format!("{TRI}f 1 2 3\n{line}\n"));
             assert_eq!(e, format!("t.obj:5: {message}"));
         }
+    }
+
+    #[test]
+    fn usemtl_and_mtllib_are_recorded_per_face() {
+        let m = load(&format!(
+            "mtllib my lib.mtl\n{TRI}f 1 2 3\nusemtl  red  paint \nf 1 2 3\nusemtl\nv 1 1 0\nf 1 2 4 3\nusemtl red  paint\nf 3 2 1\n"
+        ))
+        .unwrap();
+        let named = |v: &[Named]| {
+            v.iter()
+                .map(|n| (n.name.clone(), n.line))
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(named(&m.mtllibs), [("my lib.mtl".to_string(), 1)]);
+        // A name keeps its inner spaces; a bare `usemtl` names "" (Blender).
+        assert_eq!(
+            named(&m.usemtl),
+            [("red  paint".to_string(), 6), (String::new(), 8)]
+        );
+        // Before any usemtl, then red paint, the quad's two triangles "",
+        // red paint again.
+        assert_eq!(m.tri_usemtl, [NO_USEMTL, 0, 1, 1, 0]);
+        // Without usemtl nothing is stored per triangle.
+        assert!(
+            load(&format!("{TRI}f 1 2 3\n"))
+                .unwrap()
+                .tri_usemtl
+                .is_empty()
+        );
     }
 
     #[test]

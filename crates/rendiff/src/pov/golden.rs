@@ -124,10 +124,11 @@ pub struct Reference {
 #[must_use]
 pub fn has_ray_tree(tri: &TriScene) -> bool {
     tri.max_depth > 1
-        && tri
-            .objects
-            .iter()
-            .any(|o| tri.materials[usize::from(o.material)].spawns_rays())
+        && (0..tri.objects.len()).any(|o| {
+            tri.object_materials(o)
+                .iter()
+                .any(|&m| tri.materials[usize::from(m)].spawns_rays())
+        })
 }
 
 /// The references a scene has, exported.

@@ -44,15 +44,22 @@ pub struct ExportOptions {
 }
 
 /// An image the exported SDL reads.
-#[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct ImageRef {
     /// The name written in the SDL.
     pub name: String,
     /// The file it comes from.
     pub source: PathBuf,
-    /// For an 8-bit greyscale PNG, which POV-Ray 3.7 misreads (POVRAY.md
-    /// §9.2): the RGB copy to write at `name` before rendering.
+    /// The file at `name` is a copy rendiff writes before rendering
+    /// ([`ImageRef::materialise`]): the RGB copy of an 8-bit greyscale
+    /// PNG, which POV-Ray 3.7 misreads (POVRAY.md §9.2), or a PNG of the
+    /// texels below.
     pub rgb_copy: bool,
+    /// Texels POV-Ray must see exactly as rendiff does, written as a
+    /// 16-bit PNG at `name`: a JPEG decoded (POV-Ray's libjpeg would
+    /// decode it to other values), or an image tinted by an OBJ material's
+    /// Kd. `None` for a file POV-Ray reads itself.
+    pub texels: Option<std::sync::Arc<crate::texture::Texture>>,
 }
 
 impl ImageRef {
@@ -65,6 +72,23 @@ impl ImageRef {
     pub fn materialise(&self, dir: &std::path::Path) -> Result<(), crate::image_io::ImageIoError> {
         if !self.rgb_copy {
             return Ok(());
+        }
+        if let Some(tex) = &self.texels {
+            // v/255 and v/65535 texels are exact in 16 bits (v·257); a
+            // tinted texel is off by at most half a 16-bit code.
+            let channels = if tex.has_alpha() { 4 } else { 3 };
+            let words: Vec<u16> = tex
+                .texels()
+                .iter()
+                .flat_map(|t| t[..channels].iter().map(|&v| crate::color::to_linear16(v)))
+                .collect();
+            return crate::image_io::write_png16(
+                &dir.join(&self.name),
+                tex.width(),
+                tex.height(),
+                tex.has_alpha(),
+                &words,
+            );
         }
         let tex = crate::texture::Texture::load(&self.source).map_err(|e| {
             crate::image_io::ImageIoError::Png {
@@ -508,13 +532,34 @@ fn write_objects(
         let m = &tri.materials[usize::from(obj.material)];
         let info = &tri.objects[k];
         let mut body = String::new();
-        let uv = if is_primitive(obj, opts.geometry) {
-            write_primitive(&mut body, obj);
-            matches!(obj.shape, Shape::Sphere { .. })
+        let per_face = matches!(
+            &obj.shape,
+            Shape::Mesh {
+                face_materials: Some(_),
+                ..
+            }
+        );
+        if per_face {
+            // Each face its own texture (an OBJ's materials): a
+            // texture_list in the mesh2, one object with one inside.
+            let list = tri.object_materials(k);
+            let mut textures = Vec::with_capacity(list.len());
+            for &mk in &list {
+                let mut t = String::new();
+                let mat = &tri.materials[usize::from(mk)];
+                write_texture(&mut t, scene, mat, mat.needs_uv(), names, images)?;
+                textures.push(t);
+            }
+            write_mesh2_textured(&mut body, tri, k, &list, &textures, opts.abridged);
         } else {
-            write_mesh2(&mut body, tri, k, opts.abridged)
-        };
-        write_texture(&mut body, scene, m, uv, names, images)?;
+            let uv = if is_primitive(obj, opts.geometry) {
+                write_primitive(&mut body, obj);
+                matches!(obj.shape, Shape::Sphere { .. })
+            } else {
+                write_mesh2(&mut body, tri, k, opts.abridged)
+            };
+            write_texture(&mut body, scene, m, uv, names, images)?;
+        }
         if m.is_transparent() && m.ior != 1.0 {
             let _ = writeln!(body, "  interior {{ ior {} }}", f(m.ior));
         }
@@ -595,6 +640,34 @@ fn write_primitive(o: &mut String, obj: &Object) {
 /// Writes an object's triangles as `mesh2` (opening brace included);
 /// returns whether it has uvs.
 fn write_mesh2(o: &mut String, tri: &TriScene, object: usize, abridged: bool) -> bool {
+    write_mesh2_with(o, tri, object, None, abridged)
+}
+
+/// Writes an object whose faces have materials of their own as `mesh2`
+/// with a `texture_list` (`textures[i]`, the finish lines of material
+/// `list[i]`) and each face's index into it (opening brace included).
+fn write_mesh2_textured(
+    o: &mut String,
+    tri: &TriScene,
+    object: usize,
+    list: &[u16],
+    textures: &[String],
+    abridged: bool,
+) {
+    write_mesh2_with(o, tri, object, Some((list, textures)), abridged);
+}
+
+/// [`write_mesh2`], with a texture list where `textured` is given: uvs
+/// are then written where any face's material reads them, and a face whose
+/// material reads none points at uv 0 (POV-Ray wants an index on every
+/// face; that texture never reads it).
+fn write_mesh2_with(
+    o: &mut String,
+    tri: &TriScene,
+    object: usize,
+    textured: Option<(&[u16], &[String])>,
+    abridged: bool,
+) -> bool {
     let info = &tri.objects[object];
     let range = info.tris.start as usize..info.tris.end as usize;
     // Pools restricted to this object, in first-use order.
@@ -614,9 +687,17 @@ fn write_mesh2(o: &mut String, tri: &TriScene, object: usize, abridged: bool) ->
     let smooth = range.clone().any(|t| tri.tri_normals[t][0] != NO_INDEX);
     // uvs only where the material reads them (the same rule as the plan),
     // so the export does not depend on whether the plan dropped them.
-    let has_uv = range.clone().all(|t| tri.tri_uvs[t][0] != NO_INDEX)
-        && !range.is_empty()
-        && tri.materials[usize::from(info.material)].needs_uv();
+    let reads_uv = |t: usize| tri.materials[usize::from(tri.tri_material[t])].needs_uv();
+    let has_uv = match textured {
+        None => {
+            range.clone().all(|t| tri.tri_uvs[t][0] != NO_INDEX)
+                && !range.is_empty()
+                && tri.materials[usize::from(info.material)].needs_uv()
+        }
+        Some(_) => range
+            .clone()
+            .any(|t| reads_uv(t) && tri.tri_uvs[t][0] != NO_INDEX),
+    };
     let _ = writeln!(o, "mesh2 {{");
     array(
         o,
@@ -659,6 +740,10 @@ fn write_mesh2(o: &mut String, tri: &TriScene, object: usize, abridged: bool) ->
     if has_uv {
         let mut umap = std::collections::HashMap::new();
         for t in range.clone() {
+            if textured.is_some() && !(reads_uv(t) && tri.tri_uvs[t][0] != NO_INDEX) {
+                ufaces.push([0; 3]);
+                continue;
+            }
             ufaces.push(tri.tri_uvs[t].map(|u| {
                 let next = uvs.len();
                 *umap.entry(u).or_insert_with(|| {
@@ -677,12 +762,39 @@ fn write_mesh2(o: &mut String, tri: &TriScene, object: usize, abridged: bool) ->
         );
     }
     let tri3 = |t: &[usize; 3]| format!("<{},{},{}>", t[0], t[1], t[2]);
-    array(
-        o,
-        "face_indices",
-        &faces.iter().map(tri3).collect::<Vec<_>>(),
-        abridged,
-    );
+    match textured {
+        None => array(
+            o,
+            "face_indices",
+            &faces.iter().map(tri3).collect::<Vec<_>>(),
+            abridged,
+        ),
+        Some((list, textures)) => {
+            let _ = writeln!(o, "  texture_list {{ {}", textures.len());
+            for (k, t) in textures.iter().enumerate() {
+                let _ = writeln!(
+                    o,
+                    "    {}texture {{ // {}",
+                    if k > 0 { "," } else { "" },
+                    crate::escape::sdl_comment(&tri.materials[usize::from(list[k])].name)
+                );
+                for line in t.lines() {
+                    let _ = writeln!(o, "    {line}");
+                }
+                let _ = writeln!(o, "    }}");
+            }
+            let _ = writeln!(o, "  }}");
+            let items: Vec<String> = faces
+                .iter()
+                .zip(range.clone())
+                .map(|(f, t)| {
+                    let m = list.binary_search(&tri.tri_material[t]).unwrap_or_default();
+                    format!("{}, {m}", tri3(f))
+                })
+                .collect();
+            array(o, "face_indices", &items, abridged);
+        }
+    }
     if smooth {
         array(
             o,
@@ -726,7 +838,50 @@ fn write_texture(
     names: &ImageNames,
     images: &mut Vec<ImageRef>,
 ) -> Result<(), ExportError> {
-    let mut note = |tex: &crate::texture::Texture, key: &'static str| {
+    let mut note = |tex: &std::sync::Arc<crate::texture::Texture>, key: &'static str| {
+        // Texels POV-Ray cannot read from the file as rendiff does.
+        let own = tex.format() == crate::texture::ImageFormat::Jpeg || tex.tint().is_some();
+        if own {
+            let stem: String = tex
+                .path()
+                .file_stem()
+                .map_or_else(String::new, |s| s.to_string_lossy().into_owned())
+                .chars()
+                .map(|c| {
+                    if c.is_ascii_alphanumeric() || c == '-' {
+                        c
+                    } else {
+                        '_'
+                    }
+                })
+                .collect();
+            let same = |i: &ImageRef| {
+                i.source == tex.path() && i.texels.as_ref().is_some_and(|t| t.tint() == tex.tint())
+            };
+            if let Some(i) = images.iter().find(|i| same(i)) {
+                return Ok(format!("\"{}\"", i.name));
+            }
+            let taken = |n: &str| images.iter().any(|i| i.name == n);
+            let mut name = format!("rendiff_tex_{stem}.png");
+            let mut k = 2;
+            while taken(&name) {
+                name = format!("rendiff_tex_{stem}_{k}.png");
+                k += 1;
+            }
+            let literal = crate::escape::sdl_file_name(&name).map_err(|message| ExportError {
+                path: scene.path.clone(),
+                material: m.name.clone(),
+                key,
+                message,
+            })?;
+            images.push(ImageRef {
+                name,
+                source: tex.path().to_path_buf(),
+                rgb_copy: true,
+                texels: Some(tex.clone()),
+            });
+            return Ok(literal);
+        }
         let rgb_copy = tex.is_grey() && tex.bit_depth() == 8;
         let name = if rgb_copy {
             // Written by the renderer into its folder, found by +L.
@@ -749,6 +904,7 @@ fn write_texture(
                 name,
                 source: tex.path().to_path_buf(),
                 rgb_copy,
+                texels: None,
             });
         }
         Ok(literal)
@@ -770,6 +926,7 @@ fn write_texture(
         }
         Pigment::Image(tex) => {
             let name = note(tex, "pigment.image")?;
+            copy_note(o, tex, &name);
             let mut ft = String::new();
             if !tex.has_alpha() && m.filter + m.transmit > 0.0 {
                 let _ = write!(
@@ -787,6 +944,7 @@ fn write_texture(
     }
     if let Some(b) = &m.bump {
         let name = note(&b.texture, "bump.image")?;
+        copy_note(o, &b.texture, &name);
         let _ = writeln!(
             o,
             "  normal {{ bump_map {{ png {name} gamma 1.0 bump_size {} interpolate 2 }} }}",
@@ -808,6 +966,32 @@ fn write_texture(
         f(m.reflection)
     );
     Ok(())
+}
+
+/// For an image rendiff writes itself ([`ImageRef::texels`]), a comment
+/// naming its source and tint, so that the export's text (and its hash in
+/// the golden metadata) changes with them.
+fn copy_note(o: &mut String, tex: &crate::texture::Texture, literal: &str) {
+    let own = tex.format() == crate::texture::ImageFormat::Jpeg || tex.tint().is_some();
+    if !own {
+        return;
+    }
+    let source = tex
+        .path()
+        .file_name()
+        .map_or_else(String::new, |s| s.to_string_lossy().into_owned());
+    let tint = tex
+        .tint()
+        .map(|t| format!(" times {}", rgb(t)))
+        .unwrap_or_default();
+    let _ = writeln!(
+        o,
+        "  // {}",
+        crate::escape::sdl_comment(&format!(
+            "{}: the texels of {source} as rendiff reads them{tint}, written as a 16-bit PNG",
+            literal.trim_matches('"')
+        ))
+    );
 }
 
 #[cfg(test)]
