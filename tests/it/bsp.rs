@@ -212,7 +212,7 @@ fn coplanar_overlapping_triangles_show_the_lower_id_as_the_zbuffer_does() {
     let (bsp, _, _) = raster::bsp::render(&scene, &opts, &budget).unwrap();
     let (zbuf, _) = raster::render(&scene, &opts);
     assert_eq!(bsp.id, zbuf.id);
-    assert!(bsp.id.iter().any(|&id| id == 0) && bsp.id.iter().any(|&id| id == 1));
+    assert!(bsp.id.contains(&0) && bsp.id.contains(&1));
 }
 
 #[test]
@@ -374,4 +374,37 @@ fn extreme_scales_keep_the_on_plane_bound_relative() {
         assert_eq!(a.tree.triangles, reference.tree.triangles, "×{scale}");
         assert!(a.tree.splits > 0, "×{scale}: {a:?}");
     }
+}
+
+#[test]
+fn the_tree_is_held_in_the_memory_budget() {
+    // A soup whose tree outgrows 1 MiB: refused with the tree named, and
+    // everything it had reserved given back; with room, it renders.
+    let mut rng = Rng(7);
+    let tris: Vec<[Vec3; 3]> = (0..3000)
+        .map(|_| {
+            let c = v(
+                rng.rangef(-2.0, 2.0),
+                rng.rangef(-1.5, 1.5),
+                rng.rangef(-2.0, 2.0),
+            );
+            [0, 1, 2].map(|_| {
+                c + v(
+                    rng.rangef(-0.8, 0.8),
+                    rng.rangef(-0.8, 0.8),
+                    rng.rangef(-0.8, 0.8),
+                )
+            })
+        })
+        .collect();
+    let scene = TriScene::from_triangles(camera(), &tris);
+    let opts = bare_options(&scene);
+    let tight = rendiff::budget::Budget::new(1 << 20);
+    let e = raster::bsp::render(&scene, &opts, &tight).expect_err("a 1 MiB tree");
+    assert!(e.to_string().contains("BSP tree"), "{e}");
+    assert_eq!(tight.used(), 0);
+    let roomy = rendiff::budget::Budget::new(1 << 30);
+    let (_, _, tree) = raster::bsp::render(&scene, &opts, &roomy).unwrap();
+    assert!(tree.pieces > 3000, "{tree:?}");
+    assert_eq!(roomy.used(), 0);
 }

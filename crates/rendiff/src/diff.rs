@@ -305,7 +305,7 @@ fn produce(job: &Prepared, side: &Side, max_depth: u32) -> Result<(Output, Optio
                     o.cycles_broken
                 )),
                 crate::Work::Bsp { tree: t, .. } => Some(format!(
-                    "bsp: {} triangles cut into {} pieces ({} splits) by a tree of {} nodes, {} deep, {} coplanar; built in {:.1} ms ({} classifications); its real mismatches would be samples it ordered wrongly",
+                    "bsp: {} triangles cut into {} pieces ({} splits) by a tree of {} nodes, {} deep, {} coplanar; built in {:.1} ms ({} classifications); a real mismatch would be a sample it ordered wrongly",
                     t.triangles,
                     t.pieces,
                     t.splits,
