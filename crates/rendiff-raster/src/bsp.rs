@@ -38,8 +38,8 @@
 //!
 //! **Robustness.** The polygons the tree classifies are the triangles'
 //! unsnapped clipped polygons in f64. A vertex is *on* a plane when its
-//! signed nearness difference is within a derived bound of the rounding
-//! of both (see [`Source`] and `on_plane_bound`), so a triangle that
+//! signed nearness difference is within a bound of the rounding of both
+//! (`on_plane_bound`, derived in ARCHITECTURE.md), so a triangle that
 //! shares an edge with another, or lies in its plane, is not split by it;
 //! triangles of one plane share a node and are drawn higher id first, so
 //! the lower id ends on top, as the z-buffer breaks equal depths. A cut
