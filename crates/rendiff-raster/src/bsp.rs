@@ -28,9 +28,11 @@
 //! of triangle G by the plane of triangle P adds a node to G's *cut tree*:
 //! the screen line `L(X, Y) = q_G(X, Y) − q_P(X, Y) = 0`, where G's and
 //! P's depth planes cross, with the piece in front of P on the side
-//! `L > 0` and the one behind on `L ≤ 0`. A sample the coverage rule gives
-//! to G descends G's cut tree, one evaluation of one shared line per
-//! level, to exactly one leaf: the two pieces of a cut share the cut
+//! `L > 0` and the one behind on `L < 0` (on `L = 0` the depths are equal,
+//! and the sample goes where the lower id wins, as in the z-buffer). A
+//! sample the coverage rule gives to G descends G's cut tree, one
+//! evaluation of one shared line per level, to exactly one leaf: the two
+//! pieces of a cut share the cut
 //! itself, computed once, so every sample of G lies in exactly one of its
 //! pieces — no slivers, no cracks, no double hits, whatever the rounding.
 //! The pieces keep G's id, so shading (barycentrics from the f64 camera
@@ -171,15 +173,20 @@ struct Frag {
 }
 
 /// A node of a cut tree: a leaf (a piece and its rank), or a line with
-/// the pieces in front of the cutting plane (`L > 0`) and behind it.
+/// the pieces in front of the cutting plane (`L > 0`) and behind it
+/// (`L < 0`); where `L = 0` the two depths are equal, and the sample goes
+/// to the side that makes the lower triangle id win, as in the z-buffer.
 #[derive(Clone, Copy, Debug)]
 struct Cut {
     /// `L(X, Y) = l0·(X − ax) + l1·(Y − ay) + l2` on the triangle's anchor.
     l: [f64; 3],
-    /// The child where `L > 0`, or [`NONE`] for a leaf.
+    /// The child in front, or [`NONE`] for a leaf.
     front: u32,
-    /// The child where `L ≤ 0`, or a leaf's rank.
+    /// The child behind, or a leaf's rank.
     back: u32,
+    /// `L = 0` goes in front (drawn after the cutting triangle, so it
+    /// wins): the cut triangle's id is the lower.
+    tie_front: bool,
 }
 
 /// The pieces of every triangle and their drawing ranks: what the
@@ -214,7 +221,11 @@ impl Pieces {
                 return cut.back;
             }
             let l = cut.l[0] * dx + cut.l[1] * dy + cut.l[2];
-            c = if l > 0.0 { cut.front } else { cut.back };
+            c = if l > 0.0 || (l == 0.0 && cut.tie_front) {
+                cut.front
+            } else {
+                cut.back
+            };
         }
     }
 }
@@ -436,6 +447,7 @@ impl Builder {
             l: [0.0; 3],
             front: NONE,
             back: 0,
+            tie_front: false,
         });
         let id = u32::try_from(self.frags.len()).unwrap_or(NONE);
         self.frags.push(Frag {
@@ -476,6 +488,7 @@ impl Builder {
             l,
             front: self.frags[front as usize].leaf,
             back: self.frags[back as usize].leaf,
+            tie_front: g.tri < ps.tri,
         };
         (front, back)
     }
