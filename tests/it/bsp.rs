@@ -3,7 +3,8 @@
 //! wrongly ordered sample on the cyclic overlap and the interpenetrating
 //! teapot that defeat the painter, nor on any bundled scene; every sample
 //! the z-buffer covers is covered (pieces tile their triangle), and the
-//! shading is the z-buffer's bit for bit. Then the cases that are hard for
+//! shading is the z-buffer's bit for bit; likewise on the hazard scenes.
+//! Then the cases that are hard for
 //! a floating-point BSP: coplanar overlapping triangles, shared edges, a
 //! triangle in a splitter's plane, long thin triangles, the eye in a
 //! triangle's plane, three triangles through each other, random soups and
@@ -161,6 +162,27 @@ fn every_bundled_scene_agrees_with_the_zbuffer() {
         ));
     }
     eprint!("{report}");
+}
+
+/// The hazard scenes (a grazing eye a millimetre above a floor two
+/// kilometres wide, quads 10⁶ from the origin, a 0.05° view, far nearer
+/// than the objects, …), as they are.
+#[test]
+fn the_hazard_scenes_agree_with_the_zbuffer() {
+    let dir = crate::util::root().join("tests/data/hazards");
+    let mut names: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .filter_map(Result::ok)
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+        .collect();
+    names.sort();
+    assert!(names.len() >= 9);
+    for path in names {
+        let job = Prepared::load(&path, &Overrides::default()).unwrap();
+        let a = job_against(&job);
+        assert_sees_what_the_zbuffer_sees(&a, &path.display().to_string());
+    }
 }
 
 /// The camera of the synthetic cases: 96×72 from z = 6 towards the origin.
