@@ -58,8 +58,8 @@ use std::time::Instant;
 
 use super::clip::HVert;
 use super::{
-    Clipped, RasterOptions, RasterStats, Record, Rule, SetupCtx, clamped_screen, clip_triangle,
-    homogeneous, records, shade_pass, triangle_planes, visibility_with,
+    Clipped, RasterOptions, RasterStats, Rule, SetupCtx, clamped_screen, clip_triangle,
+    homogeneous, primary_records, shade_pass, triangle_planes, visibility_with,
 };
 use rendiff_core::budget::{Budget, OverBudget};
 use rendiff_core::camera::Projection;
@@ -621,26 +621,6 @@ impl Builder {
     }
 }
 
-/// The records of every triangle the options do not cull, as the painter
-/// and the z-buffer make them.
-fn bsp_records(scene: &TriScene, opts: &RasterOptions, grid: &SampleGrid) -> Vec<Record> {
-    let hv = homogeneous(scene, opts.perturbation());
-    records(
-        scene,
-        &hv,
-        0..scene.len(),
-        grid,
-        opts.perturbation().fill_rule,
-        |obj| {
-            (
-                opts.frustum_cull.get(obj).copied().unwrap_or(false),
-                opts.backface_cull.get(obj).copied().unwrap_or(false),
-            )
-        },
-    )
-    .0
-}
-
 /// The source of triangle `tri` (its clipped polygon's first point as the
 /// anchor) and its polygon in screen-depth space; `None` when its plane
 /// passes through the eye (the z-buffer draws nothing of it either) or
@@ -736,8 +716,8 @@ fn tree<'b>(
 ) -> Result<(Pieces, BspStats, Held<'b>), OverBudget> {
     let started = Instant::now();
     let grid = SampleGrid::new(scene.camera.samples());
-    let recs = bsp_records(scene, opts, &grid);
     let hv = homogeneous(scene, opts.perturbation());
+    let recs = primary_records(scene, opts, &hv, &grid);
     let ctx = SetupCtx::new(scene, &grid, opts.perturbation().fill_rule);
     let mut held = Held {
         budget,

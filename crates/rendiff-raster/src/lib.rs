@@ -818,6 +818,30 @@ fn records(
     (out, culled)
 }
 
+/// The records of every triangle `opts` does not cull, in id order (the
+/// list-priority backends' input).
+fn primary_records(
+    scene: &TriScene,
+    opts: &RasterOptions,
+    hv: &[HVert],
+    grid: &SampleGrid,
+) -> Vec<Record> {
+    records(
+        scene,
+        hv,
+        0..scene.len(),
+        grid,
+        opts.perturbation().fill_rule,
+        |obj| {
+            (
+                opts.frustum_cull.get(obj).copied().unwrap_or(false),
+                opts.backface_cull.get(obj).copied().unwrap_or(false),
+            )
+        },
+    )
+    .0
+}
+
 /// Triangles the plan's culling removed from primary visibility.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Culled {
