@@ -542,7 +542,9 @@ impl Runner {
         let err = image_error(&first.frame.color, reference);
         let rays = match first.work {
             Work::Ray { rays, .. } => rays.primary + rays.shadow + rays.secondary,
-            Work::Raster(s) | Work::Painter { raster: s, .. } => s.shadow_rays,
+            Work::Raster(s) | Work::Painter { raster: s, .. } | Work::Bsp { raster: s, .. } => {
+                s.shadow_rays
+            }
         };
         let cam = &self.job.tri.camera;
         Ok(Row {

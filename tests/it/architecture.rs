@@ -224,6 +224,7 @@ const ALLOWED: &[(&str, &[&str])] = &[
         &[
             "facade",
             "accel",
+            "budget",
             "camera",
             "frame",
             "image_io",

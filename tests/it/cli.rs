@@ -177,7 +177,7 @@ fn usage_errors_exit_with_2_and_say_what_was_expected() {
     let cases: &[(&[&str], &str)] = &[
         (
             &["render", "scenes/spheres.toml", "--backend", "gpu"],
-            "[possible values: raster, ray, painter]",
+            "[possible values: raster, ray, painter, bsp]",
         ),
         (
             &["diff", "scenes/spheres.toml", "--backend", "ray"],
@@ -225,7 +225,7 @@ fn usage_errors_exit_with_2_and_say_what_was_expected() {
         ),
         (
             &["diff", "scenes/spheres.toml", "--b", "nope"],
-            "expected a backend (raster, ray, painter), pov, a PATH.png, or a G-buffer folder",
+            "expected a backend (raster, ray, painter, bsp), pov, a PATH.png, or a G-buffer folder",
         ),
         (
             &[

@@ -14,8 +14,13 @@ mod adversarial;
 mod architecture;
 /// Nothing half-written: killed writes, failed golden updates.
 mod atomic;
+/// Back faces: culling loses a ray tracer's exit surfaces, never the
+/// rasterizer's primary visibility on closed meshes.
+mod backfaces;
 /// Bad input: every file of tests/data/bad gives exit 2 and a located message.
 mod bad_input;
+/// The BSP tree against the z-buffer: list priority that never fails.
+mod bsp;
 /// Bump mapping: both methods against each other and against POV-Ray.
 mod bumps;
 /// The command line: help, outputs, exit codes, the HTML report.

@@ -141,17 +141,51 @@ impl<'s> Accel<'s> {
     /// `f64` ray (see [`Ray64`]).
     #[must_use]
     pub fn intersect(&self, ray: &Ray64) -> Option<Hit> {
-        self.with_analytic(ray, self.bvh.intersect(ray))
-    }
-
-    /// The closest of a BVH hit and the analytic shapes' hits on `ray`.
-    fn with_analytic(&self, ray: &Ray64, bvh_hit: Option<BvhHit>) -> Option<Hit> {
-        let mut best = bvh_hit.map(|h| Hit {
+        let best = self.bvh.intersect(ray).map(|h| Hit {
             t: h.t,
             prim: h.id,
             b: h.b,
             t64: h.t64,
         });
+        self.nearer_analytic(ray, best)
+    }
+
+    /// `true` when triangle `tri`'s geometric normal `(v1 − v0) × (v2 − v0)`
+    /// faces along `dir` (`n·dir ≥ 0`, in `f64`): a ray in direction `dir`
+    /// meets its back face. Closed objects face out (DESIGN.md §7), so a ray
+    /// meets a back face of one first only from inside it.
+    #[must_use]
+    pub fn faces_along(&self, tri: u32, dir: DVec3) -> bool {
+        let v = self.scene.triangle_f64(tri);
+        (v[1] - v[0]).cross(v[2] - v[0]).dot(dir) >= 0.0
+    }
+
+    /// The closest hit as [`Accel::intersect`], on the triangles whose
+    /// front faces the ray (see [`Accel::faces_along`]) and the analytic
+    /// shapes: back-face culling, which the ray tracer never does; this is
+    /// here to show what it would lose. Every triangle hit along the ray
+    /// is visited.
+    #[must_use]
+    pub fn intersect_front(&self, ray: &Ray64) -> Option<Hit> {
+        let mut best: Option<Hit> = None;
+        self.bvh.for_each_hit(ray, |id, h| {
+            let nearer = best.is_none_or(|b| h.t64 < b.t64 || (h.t64 == b.t64 && id < b.prim));
+            if nearer && !self.faces_along(id, ray.dir) {
+                best = Some(Hit {
+                    t: h.t,
+                    prim: id,
+                    b: h.b,
+                    t64: h.t64,
+                });
+            }
+            false
+        });
+        self.nearer_analytic(ray, best)
+    }
+
+    /// `best`, or the nearest analytic shape's hit where that is nearer
+    /// (equal `t`: the lower id).
+    fn nearer_analytic(&self, ray: &Ray64, mut best: Option<Hit>) -> Option<Hit> {
         if !self.analytic.is_empty() {
             let (o, d) = (ray.origin, ray.dir);
             for &k in &self.analytic {

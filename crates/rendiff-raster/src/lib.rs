@@ -26,6 +26,7 @@
 
 #![warn(missing_docs, missing_debug_implementations)]
 
+pub mod bsp;
 mod clip;
 pub mod painter;
 mod shadow_map;
@@ -304,6 +305,10 @@ pub(crate) enum Rule<'a> {
     /// (`rank[tri]`, ascending), each overwriting what is there (list
     /// priority, the painter's algorithm).
     Painter(&'a [u32]),
+    /// The last drawn of the pieces a BSP tree cut the triangles into: each
+    /// covered sample belongs to exactly one piece of its triangle, and the
+    /// piece drawn last (highest rank) wins.
+    Pieces(&'a bsp::Pieces),
 }
 
 /// The visibility pass under a rule.
@@ -388,21 +393,38 @@ pub(crate) fn visibility_with(
         perspective,
     };
     let band_len = (BAND * sw) as usize;
+    // The BSP's rank of the piece each sample shows (0: none yet).
+    let mut ranks = match rule {
+        Rule::Pieces(_) => vec![0u32; total],
+        _ => Vec::new(),
+    };
+    let rank_bands: Vec<Option<&mut [u32]>> = if ranks.is_empty() {
+        (0..bands).map(|_| None).collect()
+    } else {
+        ranks.chunks_mut(band_len).map(Some).collect()
+    };
     let counters: Vec<(u64, u64)> = key
         .par_chunks_mut(band_len)
         .zip(id.par_chunks_mut(band_len))
+        .zip(rank_bands)
         .enumerate()
-        .map(|(b, (key, id))| {
+        .map(|(b, ((key, id), rank))| {
             let row0 = u32::try_from(b).unwrap_or(0) * BAND;
             let rows = row0..(row0 + BAND).min(sh);
             let mut writes = 0u64;
             let mut frags = 0u64;
+            // (A `Pieces` rule always has its rank bands.)
+            let choose = match (rule, rank) {
+                (Rule::Pieces(p), Some(rank)) => Choose::Piece(p, rank),
+                (Rule::Painter(_), _) => Choose::Last,
+                _ => Choose::Nearest,
+            };
             let mut band = Band {
                 key,
                 id,
                 row0,
                 depth_map: &depth_map,
-                overwrite: matches!(rule, Rule::Painter(_)),
+                choose,
             };
             for r in &lists[counts[b]..counts[b + 1]] {
                 let (w, f) = scan_record(&walk, r, rows.clone(), &mut band);
@@ -425,28 +447,36 @@ pub(crate) fn visibility_with(
     VisibilityBuffers { key, id, stats }
 }
 
-fn setup_triangle(
+/// What the near, far and guard planes leave of a triangle.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Clipped {
+    /// All of it, inside the guard band (the common case).
+    Whole,
+    /// The convex polygon left in `poly` (its screen points by
+    /// [`clamped_screen`]).
+    Polygon,
+    /// Nothing.
+    Nothing,
+}
+
+/// Clips triangle `v` against the near and far planes and, only where a
+/// vertex leaves it, the guard band; the polygon is left in `poly`.
+fn clip_triangle(
     v: &[HVert; 3],
-    tri: u32,
-    cull_back: bool,
     ctx: &SetupCtx<'_>,
     poly: &mut Vec<HVert>,
     tmp: &mut Vec<HVert>,
-    out: &mut Vec<Record>,
-) -> bool {
+) -> Clipped {
     let near = -ctx.clip_planes[0].c[4];
     let far = ctx.clip_planes[1].c[4];
     let guard_ok = |p: &(f64, f64)| p.0.abs() < GUARD_PX && p.1.abs() < GUARD_PX;
     // The common case: between the near and far planes and inside the
     // guard band.
-    if v.iter().all(|p| p.z >= near && p.z <= far) {
-        let s = [v[0].screen(), v[1].screen(), v[2].screen()];
-        if s.iter().all(guard_ok) {
-            return push_snapped(&s, tri, cull_back, ctx, out);
-        }
+    if v.iter().all(|p| p.z >= near && p.z <= far) && v.iter().all(|p| guard_ok(&p.screen())) {
+        return Clipped::Whole;
     }
     if v.iter().all(|p| p.z < near) || v.iter().all(|p| p.z > far) {
-        return false;
+        return Clipped::Nothing;
     }
     poly.clear();
     poly.extend_from_slice(v);
@@ -458,26 +488,56 @@ fn setup_triangle(
         clip_polygon(poly, plane, tmp);
         std::mem::swap(poly, tmp);
         if poly.len() < 3 {
-            return false;
+            return Clipped::Nothing;
         }
     }
-    // A vertex the guard planes made lies on one of them, up to the
-    // rounding of its interpolation; with an extreme dynamic range (a near
-    // plane of 1e-39 against coordinates of 1e33) that rounding can put it
-    // far outside (measured: 1e94 px). Clamping puts it back on the plane it
-    // belongs to; the clip computed each shared point once in a canonical
-    // order, so neighbours still share it bit for bit.
+    Clipped::Polygon
+}
+
+/// The screen point of a vertex the clip made, clamped onto the guard
+/// band; `None` when it is not a number.
+///
+/// A vertex the guard planes made lies on one of them, up to the rounding
+/// of its interpolation; with an extreme dynamic range (a near plane of
+/// 1e-39 against coordinates of 1e33) that rounding can put it far outside
+/// (measured: 1e94 px). Clamping puts it back on the plane it belongs to;
+/// the clip computed each shared point once in a canonical order, so
+/// neighbours still share it bit for bit.
+fn clamped_screen(p: &HVert, ctx: &SetupCtx<'_>) -> Option<(f64, f64)> {
     let (gx, gy) = (
         f64::from(ctx.size.0 / ctx.grid.n) + GUARD_PX,
         f64::from(ctx.size.1 / ctx.grid.n) + GUARD_PX,
     );
+    let (x, y) = p.screen();
+    if x.is_nan() || y.is_nan() {
+        return None;
+    }
+    Some((x.clamp(-GUARD_PX, gx), y.clamp(-GUARD_PX, gy)))
+}
+
+fn setup_triangle(
+    v: &[HVert; 3],
+    tri: u32,
+    cull_back: bool,
+    ctx: &SetupCtx<'_>,
+    poly: &mut Vec<HVert>,
+    tmp: &mut Vec<HVert>,
+    out: &mut Vec<Record>,
+) -> bool {
+    match clip_triangle(v, ctx, poly, tmp) {
+        Clipped::Whole => {
+            let s = [v[0].screen(), v[1].screen(), v[2].screen()];
+            return push_snapped(&s, tri, cull_back, ctx, out);
+        }
+        Clipped::Nothing => return false,
+        Clipped::Polygon => {}
+    }
     let mut pts = Vec::with_capacity(poly.len());
     for p in poly.iter() {
-        let (x, y) = p.screen();
-        if x.is_nan() || y.is_nan() {
+        let Some(s) = clamped_screen(p, ctx) else {
             return false;
-        }
-        pts.push((x.clamp(-GUARD_PX, gx), y.clamp(-GUARD_PX, gy)));
+        };
+        pts.push(s);
     }
     let mut culled = false;
     for k in 1..pts.len() - 1 {
@@ -644,8 +704,19 @@ struct Band<'b> {
     /// The band's first sample row.
     row0: u32,
     depth_map: &'b DepthMap,
-    /// Every fragment wins (the painter), not only the nearest.
-    overwrite: bool,
+    /// Which fragment a sample keeps.
+    choose: Choose<'b>,
+}
+
+/// Which of the fragments that cover a sample it keeps.
+enum Choose<'b> {
+    /// The nearest (depth key, then triangle id): the z-buffer.
+    Nearest,
+    /// The last drawn (the painter: records come in drawing order).
+    Last,
+    /// The piece of highest rank, with the band's ranks (rank + 1 of the
+    /// piece each sample shows, 0 for none).
+    Piece(&'b bsp::Pieces, &'b mut [u32]),
 }
 
 /// Scans one record over `rows` (a band): each covered sample takes the
@@ -660,11 +731,26 @@ fn scan_record(
     let sw = walk.sw;
     let mut writes = 0u64;
     let mut frags = 0u64;
+    let n = f64::from(walk.grid.n);
     walk_record(walk, r, rows, |row, col, _, d, _| {
         let i = ((row - band.row0) * sw + col) as usize;
         let k = band.depth_map.key(d);
         frags += 1;
-        if band.overwrite || k < band.key[i] || (k == band.key[i] && r.tri < band.id[i]) {
+        let wins = match &mut band.choose {
+            Choose::Nearest => k < band.key[i] || (k == band.key[i] && r.tri < band.id[i]),
+            Choose::Last => true,
+            Choose::Piece(pieces, ranks) => {
+                // The sample's position, as the coverage rule placed it.
+                let (x, y) = ((f64::from(col) + 0.5) / n, (f64::from(row) + 0.5) / n);
+                let rank = pieces.rank_at(r.tri, x, y).saturating_add(1);
+                let wins = rank > ranks[i];
+                if wins {
+                    ranks[i] = rank;
+                }
+                wins
+            }
+        };
+        if wins {
             band.key[i] = k;
             band.id[i] = r.tri;
             writes += 1;
@@ -682,6 +768,25 @@ struct SetupCtx<'g> {
     rule: FillRule,
 }
 
+impl<'g> SetupCtx<'g> {
+    /// The clip planes and sizes of a scene's camera.
+    fn new(scene: &TriScene, grid: &'g SampleGrid, rule: FillRule) -> SetupCtx<'g> {
+        let cam = &scene.camera;
+        SetupCtx {
+            clip_planes: planes(
+                cam.near(),
+                cam.far(),
+                f64::from(cam.width()),
+                f64::from(cam.height()),
+                GUARD_PX,
+            ),
+            grid,
+            size: (cam.sample_width(), cam.sample_height()),
+            rule,
+        }
+    }
+}
+
 /// The records of the triangles in `range`, in id order; `cull(object)`
 /// says whether to skip the object (frustum) and whether to cull its back
 /// faces.
@@ -693,19 +798,7 @@ fn records(
     rule: FillRule,
     cull: impl Fn(usize) -> (bool, bool),
 ) -> (Vec<Record>, Culled) {
-    let cam = &scene.camera;
-    let ctx = SetupCtx {
-        clip_planes: planes(
-            cam.near(),
-            cam.far(),
-            f64::from(cam.width()),
-            f64::from(cam.height()),
-            GUARD_PX,
-        ),
-        grid,
-        size: (cam.sample_width(), cam.sample_height()),
-        rule,
-    };
+    let ctx = SetupCtx::new(scene, grid, rule);
     let mut out = Vec::with_capacity(range.len());
     let mut poly = Vec::with_capacity(8);
     let mut tmp = Vec::with_capacity(8);
@@ -723,6 +816,30 @@ fn records(
         }
     }
     (out, culled)
+}
+
+/// The records of every triangle `opts` does not cull, in id order (the
+/// list-priority backends' input).
+fn primary_records(
+    scene: &TriScene,
+    opts: &RasterOptions,
+    hv: &[HVert],
+    grid: &SampleGrid,
+) -> Vec<Record> {
+    records(
+        scene,
+        hv,
+        0..scene.len(),
+        grid,
+        opts.perturbation().fill_rule,
+        |obj| {
+            (
+                opts.frustum_cull.get(obj).copied().unwrap_or(false),
+                opts.backface_cull.get(obj).copied().unwrap_or(false),
+            )
+        },
+    )
+    .0
 }
 
 /// Triangles the plan's culling removed from primary visibility.

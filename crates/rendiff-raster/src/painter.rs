@@ -31,7 +31,8 @@ use std::collections::BinaryHeap;
 use rayon::prelude::*;
 
 use super::{
-    RasterOptions, RasterStats, Record, Rule, homogeneous, records, shade_pass, visibility_with,
+    RasterOptions, RasterStats, Record, Rule, homogeneous, primary_records, shade_pass,
+    visibility_with,
 };
 use rendiff_accel::{Accel, AccelOptions, ShadowRays};
 use rendiff_core::budget::{Budget, OverBudget};
@@ -107,20 +108,7 @@ pub fn order(
 fn painter_records(scene: &TriScene, opts: &RasterOptions) -> Vec<Record> {
     let grid = SampleGrid::new(scene.camera.samples());
     let hv = homogeneous(scene, opts.perturbation());
-    let (recs, _) = records(
-        scene,
-        &hv,
-        0..scene.len(),
-        &grid,
-        opts.perturbation().fill_rule,
-        |obj| {
-            (
-                opts.frustum_cull.get(obj).copied().unwrap_or(false),
-                opts.backface_cull.get(obj).copied().unwrap_or(false),
-            )
-        },
-    );
-    recs
+    primary_records(scene, opts, &hv, &grid)
 }
 
 /// The drawing rank of the triangles of `recs` (see [`order`]).

@@ -68,6 +68,49 @@ pub struct RayStats {
 /// Trace levels counted apiece in [`RayStats::by_level`].
 pub const LEVELS: usize = 32;
 
+/// Which faces of the triangles the rays of the ray tree can hit.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Faces {
+    /// Both sides of every triangle: the ray tracer (DESIGN.md §7: it
+    /// never culls, since the rays of the ray tree come from behind).
+    #[default]
+    Both,
+    /// Only triangles whose geometric normal `(v1 − v0) × (v2 − v0)` faces
+    /// against the ray: back-face culling forced on, to show what it
+    /// loses. Shadow rays and analytic shapes are not culled.
+    Front,
+}
+
+/// What the rays of the ray tree met on back faces (a triangle whose
+/// geometric normal faces along the ray: `n·d ≥ 0`), counted by
+/// [`render_faces`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct CullStats {
+    /// Rays (primary, reflected, refracted) whose nearest triangle is a
+    /// back face: hit with [`Faces::Both`], lost with [`Faces::Front`]
+    /// (the ray goes on to the nearest front face, or the background).
+    pub back_faces: u64,
+    /// Of those, back faces of closed objects: with outward normals, a ray
+    /// meets one first only from inside — the exit surfaces.
+    pub exits: u64,
+    /// Rays refracted into a closed object, through its surface
+    /// (`T·n_g < 0`; at a silhouette a flipped shading normal can bend the
+    /// refracted ray straight back out): each must leave it through an exit
+    /// surface, unless it meets another object inside.
+    pub entries: u64,
+}
+
+impl std::ops::Add for CullStats {
+    type Output = CullStats;
+    fn add(self, o: CullStats) -> CullStats {
+        CullStats {
+            back_faces: self.back_faces + o.back_faces,
+            exits: self.exits + o.exits,
+            entries: self.entries + o.entries,
+        }
+    }
+}
+
 impl std::ops::Add for RayStats {
     type Output = RayStats;
     fn add(self, o: RayStats) -> RayStats {
@@ -119,6 +162,7 @@ struct Worker<'a, 's> {
     secondary: u64,
     by_level: [u64; LEVELS],
     straight: u64,
+    cull: CullStats,
 }
 
 impl Worker<'_, '_> {
@@ -136,6 +180,9 @@ struct Tracer<'a, 's> {
     max_depth: u32,
     /// Refracting objects that contain the eye (outermost first).
     eye_inside: Vec<u32>,
+    /// Back faces counted (and culled with [`Faces::Front`]); `None`: the
+    /// plain path, nothing counted.
+    faces: Option<Faces>,
 }
 
 /// Renders a scene with the given accelerator.
@@ -147,6 +194,26 @@ pub fn render(accel: &Accel<'_>, opts: &RayOptions) -> Frame {
 /// Renders a scene and counts the rays cast.
 #[must_use]
 pub fn render_counted(accel: &Accel<'_>, opts: &RayOptions) -> (Frame, RayStats) {
+    let (frame, stats, _) = render_with(accel, opts, None);
+    (frame, stats)
+}
+
+/// Renders a scene hitting the given faces, and counts the rays cast and
+/// the back faces the ray tree met (hit, or lost to culling).
+#[must_use]
+pub fn render_faces(
+    accel: &Accel<'_>,
+    opts: &RayOptions,
+    faces: Faces,
+) -> (Frame, RayStats, CullStats) {
+    render_with(accel, opts, Some(faces))
+}
+
+fn render_with(
+    accel: &Accel<'_>,
+    opts: &RayOptions,
+    faces: Option<Faces>,
+) -> (Frame, RayStats, CullStats) {
     let scene = accel.scene();
     let cam = &scene.camera;
     let ctx = scene.shade_context(opts.gate_eps, opts.shadows);
@@ -173,6 +240,7 @@ pub fn render_counted(accel: &Accel<'_>, opts: &RayOptions) -> (Frame, RayStats)
         ctx,
         max_depth: opts.max_depth.max(1),
         eye_inside,
+        faces,
     };
     let sw = cam.sample_width();
     // Bands of TILE sample rows, each traced in TILE×TILE tiles (coherent
@@ -185,6 +253,7 @@ pub fn render_counted(accel: &Accel<'_>, opts: &RayOptions) -> (Frame, RayStats)
                 secondary: 0,
                 by_level: [0; LEVELS],
                 straight: 0,
+                cull: CullStats::default(),
             };
             let mut primary = 0u64;
             for tx in (0..sw).step_by(TILE as usize) {
@@ -195,18 +264,21 @@ pub fn render_counted(accel: &Accel<'_>, opts: &RayOptions) -> (Frame, RayStats)
                     }
                 }
             }
-            RayStats {
+            let stats = RayStats {
                 primary,
                 shadow: w.vis.cast(),
                 secondary: w.secondary,
                 by_level: w.by_level,
                 straight: w.straight,
-            }
+            };
+            (stats, w.cull)
         })
         .into_iter()
-        .fold(RayStats::default(), |a, b| a + b);
+        .fold((RayStats::default(), CullStats::default()), |a, b| {
+            (a.0 + b.0, a.1 + b.1)
+        });
     frame.resolve();
-    (frame, stats)
+    (frame, stats.0, stats.1)
 }
 
 impl Tracer<'_, '_> {
@@ -218,7 +290,7 @@ impl Tracer<'_, '_> {
         // `Camera::primary_ray` is this ray rounded to f32 (one rounding
         // of each part): derived here rather than computed again.
         let ray = ray64.to_f32();
-        let Some(hit) = self.accel.intersect(&ray64) else {
+        let Some(hit) = self.intersect(&ray64, w) else {
             return Sample::background(self.scene.background);
         };
         let (sp, p64) = self.surface(&hit, o64, d64);
@@ -227,6 +299,29 @@ impl Tracer<'_, '_> {
         let color =
             shaded.local + self.children(w, &sp, &shaded, ray.dir, Depth::PRIMARY, &mut inside);
         Sample::hit(color, cam.frame_depth(p64), hit.prim, shaded.flags)
+    }
+
+    /// The nearest hit of a ray of the ray tree on the faces it may hit,
+    /// counting the back faces it meets when asked to.
+    fn intersect(&self, ray: &Ray64, w: &mut Worker<'_, '_>) -> Option<Hit> {
+        let Some(faces) = self.faces else {
+            return self.accel.intersect(ray);
+        };
+        let nearest = self.accel.intersect(ray);
+        if let Some(h) = nearest
+            && let Prim::Triangle(id) = self.scene.prim(h.prim)
+            && self.accel.faces_along(id, ray.dir)
+        {
+            w.cull.back_faces += 1;
+            let object = self.scene.tri_object[id as usize] as usize;
+            if self.scene.objects[object].closed {
+                w.cull.exits += 1;
+            }
+            if faces == Faces::Front {
+                return self.accel.intersect_front(ray);
+            }
+        }
+        nearest
     }
 
     /// Shading inputs and the f64 hit point of a hit of the ray `(o, d)`
@@ -248,7 +343,7 @@ impl Tracer<'_, '_> {
     /// Colour along a secondary ray.
     fn trace(&self, w: &mut Worker<'_, '_>, ray: &Ray, depth: Depth, inside: &mut Vec<u32>) -> Rgb {
         w.secondary += 1;
-        let Some(hit) = self.accel.intersect(&Ray64::from(ray)) else {
+        let Some(hit) = self.intersect(&Ray64::from(ray), w) else {
             return self.scene.background;
         };
         let (sp, _) = self.surface(&hit, to_f64(ray.origin), to_f64(ray.dir));
@@ -315,6 +410,15 @@ impl Tracer<'_, '_> {
                             child_inside.retain(|&o| o != obj);
                         } else {
                             child_inside.push(obj);
+                            // Through the surface into a closed object (at a
+                            // silhouette a flipped shading normal can bend the
+                            // refracted ray straight back out).
+                            if self.faces.is_some()
+                                && self.scene.objects[obj as usize].closed
+                                && t.dot(sp.ng) < 0.0
+                            {
+                                w.cull.entries += 1;
+                            }
                         }
                         let ray = Self::spawn(sp, t);
                         w.count_level(depth.deeper());

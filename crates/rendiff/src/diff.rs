@@ -58,7 +58,7 @@ impl Side {
         }
         s.parse::<Backend>().map(Side::Backend).map_err(|_| {
             format!(
-                "unknown side \"{s}\"; expected a backend (raster, ray, painter), pov, a PATH.png, or a G-buffer folder"
+                "unknown side \"{s}\"; expected a backend (raster, ray, painter, bsp), pov, a PATH.png, or a G-buffer folder"
             )
         })
     }
@@ -226,7 +226,8 @@ pub fn tolerances(job: &Prepared) -> Result<(Tolerances, ImageTolerances), Error
     Ok((t, it))
 }
 
-/// Renders or reads one side; a painter also says how its order went.
+/// Renders or reads one side; a painter also says how its order went, a
+/// BSP tree what it cut.
 fn produce(job: &Prepared, side: &Side, max_depth: u32) -> Result<(Output, Option<String>), Error> {
     let out = match side {
         Side::Pov { golden_dir, render } => {
@@ -302,6 +303,17 @@ fn produce(job: &Prepared, side: &Side, max_depth: u32) -> Result<(Output, Optio
                     o.coplanar,
                     o.undecided,
                     o.cycles_broken
+                )),
+                crate::Work::Bsp { tree: t, .. } => Some(format!(
+                    "bsp: {} triangles cut into {} pieces ({} splits) by a tree of {} nodes, {} deep, {} coplanar; built in {:.1} ms ({} classifications); a real mismatch would be a sample it ordered wrongly",
+                    t.triangles,
+                    t.pieces,
+                    t.splits,
+                    t.nodes,
+                    t.depth,
+                    t.coplanar,
+                    t.build_ms,
+                    t.classified
                 )),
                 _ => None,
             };

@@ -6,6 +6,7 @@
 use std::path::Path;
 
 use crate::accel::{Accel, AccelOptions};
+use crate::budget::Budget;
 use crate::camera::{Camera, Projection};
 use crate::frame::Frame;
 use crate::math::{DVec3, Vec3};
@@ -27,7 +28,7 @@ fn assert_finite(frame: &Frame, what: &str) {
 
 /// A scene file: parsed as UTF-8 TOML with `dir/fuzz.toml` as its path
 /// (so relative mesh and image paths resolve in `dir`); if it loads, it is
-/// prepared at 16×12 with a 64 MiB memory budget and rendered by all three
+/// prepared at 16×12 with a 64 MiB memory budget and rendered by all four
 /// backends.
 pub fn scene_text(dir: &Path, data: &[u8]) {
     let Ok(text) = std::str::from_utf8(data) else {
@@ -41,7 +42,12 @@ pub fn scene_text(dir: &Path, data: &[u8]) {
     };
     render_and_export(
         &job,
-        &[Backend::Raster, Backend::Ray, Backend::Painter],
+        &[
+            Backend::Raster,
+            Backend::Ray,
+            Backend::Painter,
+            Backend::Bsp,
+        ],
         crate::options::Geometry::Analytic,
         "scene",
     );
@@ -349,6 +355,10 @@ pub fn triangles(data: &[u8]) {
         perturb: raster::Perturb::default(),
     };
     assert_finite(&raster::render(&scene, &opts).0, "raster");
+    // The BSP tree of the same triangles (within the fuzz budget).
+    if let Ok((frame, _, _)) = raster::bsp::render(&scene, &opts, &Budget::new(64 << 20)) {
+        assert_finite(&frame, "bsp");
+    }
     let accel = Accel::new(&scene, AccelOptions::default());
     let frame = crate::ray::render(
         &accel,

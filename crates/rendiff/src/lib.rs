@@ -67,13 +67,17 @@ pub enum Backend {
     Ray,
     /// List priority: the painter's algorithm on the rasterizer's sample grid.
     Painter,
+    /// List priority that never fails: a BSP tree of the triangles (Fuchs,
+    /// Kedem & Naylor), its pieces painted back to front on the
+    /// rasterizer's sample grid.
+    Bsp,
 }
 
 impl Backend {
     /// `true` for backends that shade locally (no ray tree).
     #[must_use]
     pub fn shades_locally(self) -> bool {
-        matches!(self, Backend::Raster | Backend::Painter)
+        matches!(self, Backend::Raster | Backend::Painter | Backend::Bsp)
     }
 }
 
@@ -83,6 +87,7 @@ impl fmt::Display for Backend {
             Backend::Raster => "raster",
             Backend::Ray => "ray",
             Backend::Painter => "painter",
+            Backend::Bsp => "bsp",
         })
     }
 }
@@ -94,9 +99,10 @@ impl FromStr for Backend {
             "raster" => Ok(Backend::Raster),
             "ray" => Ok(Backend::Ray),
             "painter" => Ok(Backend::Painter),
+            "bsp" => Ok(Backend::Bsp),
             _ => Err(options::ParseOptionError::new(
                 s,
-                format!("unknown backend \"{s}\"; expected raster, ray or painter"),
+                format!("unknown backend \"{s}\"; expected raster, ray, painter or bsp"),
             )),
         }
     }
@@ -208,6 +214,13 @@ pub enum Work {
         raster: raster::RasterStats,
         /// The drawing order.
         order: raster::painter::PainterStats,
+    },
+    /// The BSP backend's counters: the rasterizer's, and its tree.
+    Bsp {
+        /// Scan conversion and shading.
+        raster: raster::RasterStats,
+        /// The tree: pieces, splits, build cost.
+        tree: raster::bsp::BspStats,
     },
     /// The ray tracer's counters and its acceleration structure.
     Ray {
@@ -350,7 +363,7 @@ impl Prepared {
     /// # Errors
     ///
     /// [`Error::Budget`] when the render's own buffers (the painter's pair
-    /// lists) would not fit the budget.
+    /// lists, the BSP tree) would not fit the budget.
     pub fn render(&self, backend: Backend) -> Result<Rendered, Error> {
         self.render_with_depth(backend, self.settings.max_depth)
     }
@@ -375,6 +388,11 @@ impl Prepared {
                     &self.budget,
                 )?;
                 (frame, Work::Painter { raster, order })
+            }
+            Backend::Bsp => {
+                let (frame, raster, tree) =
+                    raster::bsp::render(&self.tri, &self.raster_options(), &self.budget)?;
+                (frame, Work::Bsp { raster, tree })
             }
             Backend::Ray => {
                 let accel = Accel::new(

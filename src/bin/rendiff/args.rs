@@ -96,6 +96,8 @@ pub enum BackendArg {
     Ray,
     /// The painter's algorithm (depth-sorted triangles, no z-buffer).
     Painter,
+    /// A BSP tree of the triangles, painted back to front (no z-buffer).
+    Bsp,
 }
 
 impl From<BackendArg> for rendiff::Backend {
@@ -104,6 +106,7 @@ impl From<BackendArg> for rendiff::Backend {
             BackendArg::Raster => rendiff::Backend::Raster,
             BackendArg::Ray => rendiff::Backend::Ray,
             BackendArg::Painter => rendiff::Backend::Painter,
+            BackendArg::Bsp => rendiff::Backend::Bsp,
         }
     }
 }
@@ -308,11 +311,11 @@ pub struct DiffArgs {
     /// by pixel with no scene.
     #[arg(required = true)]
     pub scenes: Vec<PathBuf>,
-    /// Side a: a backend, pov or PATH.png, as --b [possible values: raster, ray, painter, pov, PATH.png]
+    /// Side a: a backend, pov or PATH.png, as --b [possible values: raster, ray, painter, bsp, pov, PATH.png]
     #[arg(long = "a", default_value = "raster", value_name = "SIDE", value_parser = parse_side)]
     pub a: String,
     /// Side b: a backend, pov (the POV-Ray reference), or PATH.png (any
-    /// argument with '.' or '/') [possible values: raster, ray, painter, pov, PATH.png]
+    /// argument with '.' or '/') [possible values: raster, ray, painter, bsp, pov, PATH.png]
     #[arg(long = "b", default_value = "ray", value_name = "SIDE", value_parser = parse_side)]
     pub b: String,
     /// Not a diff flag: diff compares two sides, given by --a and --b (this
