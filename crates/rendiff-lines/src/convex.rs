@@ -338,7 +338,10 @@ pub(crate) mod tests {
     #[test]
     fn a_box_is_convex_and_a_dented_one_is_not() {
         let cube = cuboid([-1.0; 3], [1.0; 3]);
-        assert_eq!(check(&scene(camera(false), &[cube.clone()])), Ok(()));
+        assert_eq!(
+            check(&scene(camera(false), std::slice::from_ref(&cube))),
+            Ok(())
+        );
         // Corner 7 (the +x +y +z one) pushed toward the centre: the three
         // faces around it fold inward at their diagonals.
         let mut dented = cube.clone();

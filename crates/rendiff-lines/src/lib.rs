@@ -509,7 +509,7 @@ const START_FRACTIONS: [f64; 3] = [0.5, 0.25, 0.75];
 
 /// At most this many start rays per edge before the first count is used
 /// even if it is a tie.
-const MAX_START_RAYS: usize = 8;
+const MAX_START_RAYS: u64 = 8;
 
 /// Appel's walk: the shared steps and the BVH that counts and pierces.
 struct Ctx<'a, 's> {
@@ -658,7 +658,7 @@ impl Ctx<'_, '_> {
         let mut start = None;
         'pieces: for &k in &order {
             for f in START_FRACTIONS {
-                if rays as usize >= MAX_START_RAYS {
+                if rays >= MAX_START_RAYS {
                     break 'pieces;
                 }
                 let s = bounds[k] + f * (bounds[k + 1] - bounds[k]);
