@@ -36,11 +36,12 @@
 //! whose rounded corners fold by that much either way). The f64
 //! arithmetic of the test adds γ(8)·|d − a| (Higham), far below it.
 
-use std::collections::HashMap;
 use std::fmt;
 
 use rendiff_core::math::{DVec3, gamma64, to_f64};
 use rendiff_core::tri_scene::TriScene;
+
+use crate::EdgeEntry;
 
 /// An object Roberts' algorithm cannot take: which, and why.
 #[derive(Clone, Debug, PartialEq)]
@@ -106,13 +107,19 @@ pub(crate) fn degenerate(v: [DVec3; 3], n: DVec3, rho: f64) -> bool {
     n.length() <= 2.0 * rho * (e1 + e2) + 4.0 * rho * rho + gamma64(6) * e1 * e2
 }
 
-/// Checks that object `object` is a convex polyhedron (the module's five
-/// conditions) with vertex rounding `rho`.
+/// Checks that object `object`, whose mesh edges (with their triangles,
+/// as [`crate::mesh_edges`] finds them) are `edges`, is a convex
+/// polyhedron (the module's five conditions) with vertex rounding `rho`.
 ///
 /// # Errors
 ///
 /// [`NotConvex`] with the first condition that fails.
-pub(crate) fn check_convex(scene: &TriScene, object: u32, rho: f64) -> Result<(), NotConvex> {
+pub(crate) fn check_convex(
+    scene: &TriScene,
+    object: u32,
+    edges: &[EdgeEntry],
+    rho: f64,
+) -> Result<(), NotConvex> {
     let info = &scene.objects[object as usize];
     let fail = |reason: String| NotConvex {
         object,
@@ -139,48 +146,48 @@ pub(crate) fn check_convex(scene: &TriScene, object: u32, rho: f64) -> Result<()
             )));
         }
     }
-    // 3. Every edge convex: the directed edge a→b of one triangle meets b→a
-    // of the other (closed and consistently oriented).
-    let mut third: HashMap<(u32, u32), u32> = HashMap::with_capacity(info.tris.len() * 3);
-    for t in info.tris.clone() {
-        let ix = scene.tris[t as usize];
-        for k in 0..3 {
-            third.insert((ix[k], ix[(k + 1) % 3]), ix[(k + 2) % 3]);
-        }
-    }
+    // 3. Every edge convex: the far corner of the second triangle inside
+    // the first one's plane (outward normals: the object is closed).
     let pos = |i: u32| to_f64(scene.positions[i as usize]);
-    let mut keys: Vec<(&(u32, u32), &u32)> = third.iter().collect();
-    keys.sort_unstable();
-    for (&(a, b), &c) in keys {
-        let Some(&d) = third.get(&(b, a)) else {
+    let third = |t: u32, (a, b): (u32, u32)| {
+        scene.tris[t as usize]
+            .into_iter()
+            .find(|&x| x != a && x != b)
+            .unwrap_or(a)
+    };
+    for &((a, b), tris, count) in edges {
+        let other = tris
+            .iter()
+            .map(|&t| scene.tri_object.get(t as usize).copied())
+            .find(|&o| o != Some(object));
+        if count != 2 || other.is_some() {
             return Err(fail(format!(
-                "the edge from {} to {} has one triangle",
+                "the edge from {} to {} has {count} triangles{}",
                 fmt_point(pos(a)),
-                fmt_point(pos(b))
+                fmt_point(pos(b)),
+                match other {
+                    Some(Some(o)) => format!(", one of objects[{o}]"),
+                    _ => String::new(),
+                }
             )));
-        };
-        let v = [pos(a), pos(b), pos(c)];
+        }
+        let v = tri(tris[0]);
         let n = normal(v);
-        let x = pos(d);
+        let x = pos(third(tris[1], (a, b)));
         let fold = n.dot(x - v[0]) / n.length();
         let tol = plane_tolerance(v, n, x, rho);
         if fold > tol {
             return Err(fail(format!(
                 "the edge from {} to {} folds inward (the next triangle's corner {} lies {fold:.3e} outside this one's plane, beyond the rounding tolerance {tol:.1e})",
-                fmt_point(v[0]),
-                fmt_point(v[1]),
+                fmt_point(pos(a)),
+                fmt_point(pos(b)),
                 fmt_point(x)
             )));
         }
     }
     // 4. The centroid strictly inside every plane.
     let first = info.tris.start;
-    let verts = object_vertices(scene, object);
-    #[expect(
-        clippy::cast_precision_loss,
-        reason = "a vertex count, exact in f64 below 2^53"
-    )]
-    let centroid = verts.iter().map(|&i| pos(i)).sum::<DVec3>() / verts.len() as f64;
+    let centroid = centroid(scene, object);
     for t in info.tris.clone() {
         let v = tri(t);
         let n = normal(v);
@@ -214,6 +221,37 @@ pub(crate) fn check_convex(scene: &TriScene, object: u32, rho: f64) -> Result<()
         )));
     }
     Ok(())
+}
+
+/// The mean of the positions object `object`'s triangles use (each once).
+pub(crate) fn centroid(scene: &TriScene, object: u32) -> DVec3 {
+    let verts = object_vertices(scene, object);
+    #[expect(
+        clippy::cast_precision_loss,
+        reason = "a vertex count, exact in f64 below 2^53"
+    )]
+    let n = verts.len().max(1) as f64;
+    verts
+        .iter()
+        .map(|&i| to_f64(scene.positions[i as usize]))
+        .sum::<DVec3>()
+        / n
+}
+
+/// The mesh edges of each object, in the order of `edges` (an edge goes to
+/// the object of its first triangle).
+pub(crate) fn edges_by_object(scene: &TriScene, edges: &[EdgeEntry]) -> Vec<Vec<EdgeEntry>> {
+    let mut out = vec![Vec::new(); scene.objects.len()];
+    for &e in edges {
+        if let Some(list) = scene
+            .tri_object
+            .get(e.1[0] as usize)
+            .and_then(|&o| out.get_mut(o as usize))
+        {
+            list.push(e);
+        }
+    }
+    out
 }
 
 /// The position indices object `object`'s triangles use, sorted, once each.
@@ -332,7 +370,9 @@ pub(crate) mod tests {
 
     fn check(s: &TriScene) -> Result<(), NotConvex> {
         let rho = vertex_rounding(largest_coordinate(s));
-        (0..u32::try_from(s.objects.len()).unwrap()).try_for_each(|o| check_convex(s, o, rho))
+        let edges = edges_by_object(s, &crate::mesh_edges(s));
+        (0..u32::try_from(s.objects.len()).unwrap())
+            .try_for_each(|o| check_convex(s, o, &edges[o as usize], rho))
     }
 
     #[test]

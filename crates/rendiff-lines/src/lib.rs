@@ -1,5 +1,11 @@
 //! Hidden-line drawing: the visible edges of the scene's triangles, by
-//! Appel's quantitative invisibility (1967).
+//! Appel's quantitative invisibility (1967, [`hidden_lines`], below) or,
+//! for scenes made of convex polyhedra, by Roberts' algorithm (1963,
+//! [`roberts_lines`]: back-face culling and each edge's parameter interval
+//! clipped against every other polyhedron; see its module). Both give the
+//! same [`Drawing`] of [`Segment`]s for the same writers.
+//!
+//! Appel's method:
 //!
 //! 1. **Edges** of the triangle mesh (positions welded as the tessellator
 //!    shares them): *boundaries* (one triangle, or more than two),
@@ -210,7 +216,7 @@ pub fn hidden_lines(scene: &TriScene, accel: &Accel<'_>, opts: &LinesOptions) ->
         edges: keys.len(),
         ..LinesStats::default()
     };
-    let edges = ctx.b.drawn_edges(keys);
+    let edges = ctx.b.drawn_edges(&keys);
     stats.drawn_edges = edges.len();
     let contours = contour_indices(&edges);
     stats.contours = contours.len();
@@ -325,9 +331,9 @@ impl<'a> Base<'a> {
 
     /// The edges to draw, in the order of `keys`: the boundaries,
     /// silhouettes and creases, clipped to the near plane and projected.
-    fn drawn_edges(&self, keys: Vec<EdgeEntry>) -> Vec<Edge> {
-        keys.into_iter()
-            .filter_map(|entry| self.drawn_edge(entry))
+    fn drawn_edges(&self, keys: &[EdgeEntry]) -> Vec<Edge> {
+        keys.iter()
+            .filter_map(|&entry| self.drawn_edge(entry))
             .collect()
     }
 

@@ -48,8 +48,6 @@
 //! renderers clip those parts, so scenes where it matters differ from the
 //! z-buffer in both methods.
 
-use std::collections::HashMap;
-
 use rayon::prelude::*;
 
 use rendiff_accel::{Accel, AccelOptions};
@@ -58,9 +56,12 @@ use rendiff_core::math::{DVec3, gamma64, to_f64};
 use rendiff_core::tri_scene::TriScene;
 
 use crate::convex::{
-    NotConvex, check_convex, largest_coordinate, object_vertices, vertex_rounding,
+    NotConvex, centroid, check_convex, edges_by_object, largest_coordinate, object_vertices,
+    vertex_rounding,
 };
-use crate::{Base, Drawing, Edge, LinesOptions, LinesStats, Segment, lerp3, merge, mesh_edges};
+use crate::{
+    Base, Drawing, Edge, EdgeEntry, LinesOptions, LinesStats, Segment, lerp3, merge, mesh_edges,
+};
 
 /// Draws the visible edges of a scene of convex polyhedra by Roberts'
 /// algorithm: the same edges, classification, segment type and writers as
@@ -73,16 +74,17 @@ use crate::{Base, Drawing, Edge, LinesOptions, LinesStats, Segment, lerp3, merge
 /// polyhedron.
 pub fn roberts_lines(scene: &TriScene, opts: &LinesOptions) -> Result<Drawing, NotConvex> {
     let rho = vertex_rounding(largest_coordinate(scene));
+    let keys = mesh_edges(scene);
+    let per_object = edges_by_object(scene, &keys);
     let objects: Vec<u32> = (0..u32::try_from(scene.objects.len()).unwrap_or(u32::MAX)).collect();
     let checks: Vec<Result<(), NotConvex>> = objects
         .par_iter()
-        .map(|&o| check_convex(scene, o, rho))
+        .map(|&o| check_convex(scene, o, &per_object[o as usize], rho))
         .collect();
     checks.into_iter().collect::<Result<Vec<()>, NotConvex>>()?;
 
     let base = Base::new(scene, opts);
     let cam = base.cam;
-    let keys = mesh_edges(scene);
     let mut stats = LinesStats {
         edges: keys.len(),
         objects: scene.objects.len(),
@@ -90,7 +92,7 @@ pub fn roberts_lines(scene: &TriScene, opts: &LinesOptions) -> Result<Drawing, N
     };
     // Back-face culling: Appel's drawn edges less those with no front face.
     let (edges, culled): (Vec<Edge>, Vec<Edge>) =
-        base.drawn_edges(keys).into_iter().partition(|e| {
+        base.drawn_edges(&keys).into_iter().partition(|e| {
             e.tris
                 .iter()
                 .any(|&t| t != u32::MAX && base.facing[t as usize])
@@ -98,7 +100,10 @@ pub fn roberts_lines(scene: &TriScene, opts: &LinesOptions) -> Result<Drawing, N
     stats.culled = culled.len();
     stats.drawn_edges = edges.len();
 
-    let polys: Vec<Poly> = objects.par_iter().map(|&o| Poly::new(&base, o)).collect();
+    let polys: Vec<Poly> = objects
+        .par_iter()
+        .map(|&o| Poly::new(&base, o, &per_object[o as usize]))
+        .collect();
     stats.faces = polys.iter().map(|p| p.faces.len()).sum();
     stats.silhouette_planes = polys.iter().map(|p| p.cone.len()).sum();
 
@@ -283,12 +288,14 @@ struct Face {
     rect: Option<Rect>,
 }
 
-/// What one polyhedron hides: its front faces, its silhouette planes, its
-/// screen box (`None` where a vertex does not project) and depth range.
+/// What one polyhedron hides: its front faces (and a screen grid of
+/// them), its silhouette planes, its screen box (`None` where a vertex
+/// does not project) and depth range.
 #[derive(Debug)]
 struct Poly {
     object: u32,
     faces: Vec<Face>,
+    grid: Option<FaceGrid>,
     cone: Vec<Plane>,
     rect: Option<Rect>,
     zmin: f64,
@@ -296,19 +303,15 @@ struct Poly {
 }
 
 impl Poly {
-    /// Culls the back faces of object `object` and builds the planes of the
-    /// volume it hides.
-    fn new(base: &Base<'_>, object: u32) -> Poly {
+    /// Culls the back faces of object `object` (mesh edges `edges`) and
+    /// builds the planes of the volume it hides.
+    fn new(base: &Base<'_>, object: u32, edges: &[EdgeEntry]) -> Poly {
         let scene = base.scene;
         let cam = base.cam;
         let info = &scene.objects[object as usize];
         let verts = object_vertices(scene, object);
         let pos = |i: u32| to_f64(scene.positions[i as usize]);
-        #[expect(
-            clippy::cast_precision_loss,
-            reason = "a vertex count, exact in f64 below 2^53"
-        )]
-        let centroid = verts.iter().map(|&i| pos(i)).sum::<DVec3>() / verts.len() as f64;
+        let centroid = centroid(scene, object);
         let (mut zmin, mut zmax) = (f64::INFINITY, f64::NEG_INFINITY);
         for &i in &verts {
             let z = cam.view_depth(pos(i));
@@ -316,60 +319,188 @@ impl Poly {
             zmax = zmax.max(z);
         }
         let rect = Rect::of_points(cam, verts.iter().map(|&i| pos(i)));
-        let mut faces = Vec::new();
-        // Directed edge → its triangle, for the silhouette.
-        let mut owner: HashMap<(u32, u32), u32> = HashMap::with_capacity(info.tris.len() * 3);
-        for t in info.tris.clone() {
-            let ix = scene.tris[t as usize];
-            for k in 0..3 {
-                owner.insert((ix[k], ix[(k + 1) % 3]), t);
-            }
-            if base.facing[t as usize] {
+        let faces: Vec<Face> = info
+            .tris
+            .clone()
+            .filter(|&t| base.facing[t as usize])
+            .filter_map(|t| {
                 let v = scene.triangle_f64(t);
-                if let Some(plane) = Plane::through(v, Corners::Face, centroid) {
-                    faces.push(Face {
-                        plane,
-                        rect: Rect::of_points(cam, v),
-                    });
-                }
-            }
-        }
-        let mut cone = Vec::new();
-        for t in info.tris.clone() {
-            if !base.facing[t as usize] {
-                continue;
-            }
-            let ix = scene.tris[t as usize];
-            for k in 0..3 {
-                let (a, b) = (ix[k], ix[(k + 1) % 3]);
-                let Some(&other) = owner.get(&(b, a)) else {
-                    continue;
-                };
-                if base.facing[other as usize] {
-                    continue;
-                }
+                Plane::through(v, Corners::Face, centroid).map(|plane| Face {
+                    plane,
+                    rect: Rect::of_points(cam, v),
+                })
+            })
+            .collect();
+        // The silhouette: edges between a front and a back face.
+        let cone = edges
+            .iter()
+            .filter(|(_, t, count)| {
+                *count == 2 && base.facing[t[0] as usize] != base.facing[t[1] as usize]
+            })
+            .filter_map(|&((a, b), _, _)| {
                 let (va, vb) = (pos(a), pos(b));
-                let plane = match cam.projection() {
+                // A silhouette edge seen end on has no plane; its
+                // neighbours' planes meet along its sight line.
+                match cam.projection() {
                     Projection::Perspective { .. } => {
                         Plane::through([cam.eye(), va, vb], Corners::Eye, centroid)
                     }
                     Projection::Orthographic { .. } => {
                         Plane::through([va, vb, va + cam.forward()], Corners::Direction, centroid)
                     }
-                };
-                // A silhouette edge seen end on has no plane; its
-                // neighbours' planes meet along its sight line.
-                cone.extend(plane);
-            }
-        }
+                }
+            })
+            .collect();
+        let grid = rect.and_then(|r| FaceGrid::new(r, &faces));
         Poly {
             object,
             faces,
+            grid,
             cone,
             rect,
             zmin,
             zmax,
         }
+    }
+
+    /// Calls `f` with the index of every front face whose screen box meets
+    /// the box of the screen segment `a`–`b`, each once; with a grid, only
+    /// of those listed in the cells along the segment.
+    fn for_each_relevant_face(&self, a: (f64, f64), b: (f64, f64), mut f: impl FnMut(usize)) {
+        let seg = Rect::of_segment(a, b);
+        let mut visit = |k: usize| {
+            if self.faces[k].rect.is_none_or(|r| r.meets(&seg)) {
+                f(k);
+            }
+        };
+        match &self.grid {
+            None => (0..self.faces.len()).for_each(&mut visit),
+            Some(grid) => {
+                let mut found = grid.faces_along(a, b);
+                found.sort_unstable();
+                found.dedup();
+                found.into_iter().for_each(|k| visit(k as usize));
+            }
+        }
+    }
+}
+
+/// A uniform screen grid over a polyhedron's box, each cell listing the
+/// front faces whose boxes meet it: the relevant faces of an edge are
+/// found in the cells along it, not among all faces.
+#[derive(Debug)]
+struct FaceGrid {
+    rect: Rect,
+    nx: usize,
+    ny: usize,
+    cells: Vec<Vec<u32>>,
+    /// Faces without a screen box (a corner not in front of the eye):
+    /// relevant everywhere.
+    everywhere: Vec<u32>,
+}
+
+impl FaceGrid {
+    /// About this many faces per cell, on a grid of at most 256 × 256.
+    const PER_CELL: usize = 4;
+
+    /// The grid of `faces` over `rect`; `None` for a handful of faces,
+    /// where scanning them all is as quick.
+    fn new(rect: Rect, faces: &[Face]) -> Option<FaceGrid> {
+        if faces.len() < 4 * Self::PER_CELL {
+            return None;
+        }
+        #[expect(
+            clippy::cast_possible_truncation,
+            clippy::cast_sign_loss,
+            clippy::cast_precision_loss,
+            reason = "a face count's square root, clamped to 1 … 256"
+        )]
+        let side = ((faces.len() / Self::PER_CELL) as f64)
+            .sqrt()
+            .ceil()
+            .clamp(1.0, 256.0) as usize;
+        let mut g = FaceGrid {
+            rect,
+            nx: side,
+            ny: side,
+            cells: vec![Vec::new(); side * side],
+            everywhere: Vec::new(),
+        };
+        for (k, face) in faces.iter().enumerate() {
+            let k = u32::try_from(k).unwrap_or(u32::MAX);
+            match face.rect {
+                Some(r) => {
+                    let (x0, y0) = g.cell_of(r.x0, r.y0);
+                    let (x1, y1) = g.cell_of(r.x1, r.y1);
+                    for y in y0..=y1 {
+                        for x in x0..=x1 {
+                            g.cells[y * g.nx + x].push(k);
+                        }
+                    }
+                }
+                None => g.everywhere.push(k),
+            }
+        }
+        Some(g)
+    }
+
+    /// The cell of a screen point, clamped to the grid.
+    fn cell_of(&self, x: f64, y: f64) -> (usize, usize) {
+        let clamp = |v: f64, lo: f64, hi: f64, n: usize| {
+            let u = ((v - lo) / (hi - lo)).clamp(0.0, 1.0);
+            #[expect(
+                clippy::cast_possible_truncation,
+                clippy::cast_sign_loss,
+                clippy::cast_precision_loss,
+                reason = "clamped to the grid's 1 … 256 cells"
+            )]
+            let k = ((u * n as f64).floor() as usize).min(n - 1);
+            k
+        };
+        (
+            clamp(x, self.rect.x0, self.rect.x1, self.nx),
+            clamp(y, self.rect.y0, self.rect.y1, self.ny),
+        )
+    }
+
+    /// The faces (with repeats) listed in the cells the segment `a`–`b`
+    /// passes through: it is cut into pieces no longer than a cell's
+    /// smaller side, and each piece's box (within 2 × 2 cells) is taken
+    /// whole — a superset of the cells it crosses.
+    fn faces_along(&self, a: (f64, f64), b: (f64, f64)) -> Vec<u32> {
+        let cw = (self.rect.x1 - self.rect.x0) / f64::from(u32::try_from(self.nx).unwrap_or(1));
+        let ch = (self.rect.y1 - self.rect.y0) / f64::from(u32::try_from(self.ny).unwrap_or(1));
+        let step = cw.min(ch).max(1e-9);
+        let len = (b.0 - a.0).hypot(b.1 - a.1);
+        #[expect(
+            clippy::cast_possible_truncation,
+            clippy::cast_sign_loss,
+            reason = "a segment's length in cells, clamped"
+        )]
+        let pieces = (len / step).ceil().clamp(1.0, 1e6) as u32;
+        let mut out = self.everywhere.clone();
+        let mut last = usize::MAX;
+        for i in 0..pieces {
+            let (u0, u1) = (
+                f64::from(i) / f64::from(pieces),
+                f64::from(i + 1) / f64::from(pieces),
+            );
+            let p = |u: f64| (a.0 + (b.0 - a.0) * u, a.1 + (b.1 - a.1) * u);
+            let r = Rect::of_segment(p(u0), p(u1));
+            let (x0, y0) = self.cell_of(r.x0, r.y0);
+            let (x1, y1) = self.cell_of(r.x1, r.y1);
+            for y in y0..=y1 {
+                for x in x0..=x1 {
+                    let c = y * self.nx + x;
+                    // Consecutive pieces share cells: skip an immediate repeat.
+                    if c != last {
+                        out.extend_from_slice(&self.cells[c]);
+                        last = c;
+                    }
+                }
+            }
+        }
+        out
     }
 }
 
@@ -422,18 +553,19 @@ impl Roberts<'_, '_> {
         }
         // The relevant faces: those whose screen box meets what is left.
         let cam = self.base.cam;
-        let left = Rect::of_segment(
+        let (a, b) = (
             project(cam, lerp3(e.p, lo), e.q[0]),
             project(cam, lerp3(e.p, hi), e.q[1]),
         );
-        for f in &poly.faces {
-            if f.rect.is_some_and(|r| !r.meets(&left)) {
-                continue;
+        let mut alive = true;
+        poly.for_each_relevant_face(a, b, |k| {
+            if alive {
+                st.plane_tests += 1;
+                alive = self.clip(e, &poly.faces[k].plane, &mut lo, &mut hi);
             }
-            st.plane_tests += 1;
-            if !self.clip(e, &f.plane, &mut lo, &mut hi) {
-                return None;
-            }
+        });
+        if !alive {
+            return None;
         }
         Some((lo, hi))
     }
@@ -736,53 +868,102 @@ mod tests {
         (pos, tris)
     }
 
-    /// Whether the segment from `a` to `b` passes through the inside of the
-    /// turned box (slabs in its own frame, exact f64 sizes).
-    fn through_box(c: [f64; 3], h: [f64; 3], angle: f64, a: DVec3, b: DVec3) -> bool {
-        let (sin, cos) = angle.sin_cos();
-        let local = |p: DVec3| {
-            let p = p - DVec3::from(c);
-            DVec3::new(cos * p.x - sin * p.z, p.y, sin * p.x + cos * p.z)
-        };
-        let (a, b) = (local(a), local(b));
-        let d = b - a;
-        let (mut t0, mut t1) = (0.0f64, 1.0f64);
-        for k in 0..3 {
-            if d[k] == 0.0 {
-                if a[k].abs() >= h[k] {
-                    return false;
-                }
-                continue;
+    /// A latitude-longitude sphere of `n` segments (n/2 rings) around `c`,
+    /// counter-clockwise seen from outside: enough faces for the face grid.
+    fn globe(c: [f64; 3], r: f64, n: u32) -> (Vec<Vec3>, Vec<[u32; 3]>) {
+        let rings = n / 2;
+        let mut pos = vec![DVec3::new(0.0, r, 0.0)];
+        for i in 1..rings {
+            let th = std::f64::consts::PI * f64::from(i) / f64::from(rings);
+            for j in 0..n {
+                let ph = std::f64::consts::TAU * f64::from(j) / f64::from(n);
+                pos.push(DVec3::new(th.sin() * ph.cos(), th.cos(), th.sin() * ph.sin()) * r);
             }
-            let (u, v) = ((-h[k] - a[k]) / d[k], (h[k] - a[k]) / d[k]);
-            t0 = t0.max(u.min(v));
-            t1 = t1.min(u.max(v));
+        }
+        pos.push(DVec3::new(0.0, -r, 0.0));
+        let south = u32::try_from(pos.len() - 1).unwrap();
+        let ring = |i: u32, j: u32| 1 + (i - 1) * n + j % n;
+        let mut tris = Vec::new();
+        for j in 0..n {
+            tris.push([0, ring(1, j + 1), ring(1, j)]);
+            tris.push([south, ring(rings - 1, j), ring(rings - 1, j + 1)]);
+        }
+        for i in 1..rings - 1 {
+            for j in 0..n {
+                let (a, b, cc, d) = (
+                    ring(i, j),
+                    ring(i, j + 1),
+                    ring(i + 1, j),
+                    ring(i + 1, j + 1),
+                );
+                tris.push([a, b, d]);
+                tris.push([a, d, cc]);
+            }
+        }
+        let pos = pos
+            .iter()
+            .map(|p| rendiff_core::math::to_f32(*p + DVec3::from(c)))
+            .collect();
+        (pos, tris)
+    }
+
+    /// Whether the segment from `a` to `b` passes through the inside of the
+    /// closed convex mesh: the part of it behind every triangle's plane
+    /// has positive length.
+    fn through(mesh: &(Vec<Vec3>, Vec<[u32; 3]>), a: DVec3, b: DVec3) -> bool {
+        let (mut t0, mut t1) = (0.0f64, 1.0f64);
+        for t in &mesh.1 {
+            let v = t.map(|i| to_f64(mesh.0[i as usize]));
+            let n = (v[1] - v[0]).cross(v[2] - v[0]);
+            let (ha, hb) = (n.dot(a - v[0]), n.dot(b - v[0]));
+            if ha >= 0.0 && hb >= 0.0 {
+                return false;
+            }
+            if ha >= 0.0 {
+                t0 = t0.max(ha / (ha - hb));
+            } else if hb >= 0.0 {
+                t1 = t1.min(ha / (ha - hb));
+            }
         }
         t1 - t0 > 1e-9
     }
 
     proptest::proptest! {
         #![proptest_config(proptest::prelude::ProptestConfig::with_cases(256))]
-        /// Roberts' QIs against brute force on random turned boxes (some
-        /// overlapping, seen in perspective or orthographically): at points along every piece,
-        /// away from its ends, the number of other boxes the sight segment
-        /// passes through is the piece's QI.
+        /// Roberts' QIs against brute force on random turned boxes and
+        /// tessellated spheres (some overlapping, seen in perspective or
+        /// orthographically; the spheres have enough faces for the face
+        /// grid): at points along every piece, away from its ends, the
+        /// number of other objects the sight segment passes through — by
+        /// clipping the sight segment, not the edge, against all their
+        /// planes — is the piece's QI.
         #[test]
-        fn qis_match_sight_segments_through_boxes(
-            boxes in proptest::collection::vec(
-                ([-3.0f64..3.0, -2.0f64..2.0, -6.0f64..4.0], [0.1f64..1.5, 0.1f64..1.5, 0.1f64..1.5], 0.0f64..3.2),
+        fn qis_match_sight_segments_through_objects(
+            objects in proptest::collection::vec(
+                (
+                    [-3.0f64..3.0, -2.0f64..2.0, -6.0f64..4.0],
+                    [0.1f64..1.5, 0.1f64..1.5, 0.1f64..1.5],
+                    0.0f64..3.2,
+                    proptest::option::weighted(0.4, 12u32..40),
+                ),
                 2..6,
             ),
             ortho in proptest::bool::ANY,
             eye in [-4.0f64..4.0, -3.0f64..3.0],
         ) {
             let eye = DVec3::new(eye[0], eye[1], 10.0);
-            let inside = boxes.iter().any(|(c, h, a)| through_box(*c, *h, *a, eye, eye + DVec3::splat(1e-9)));
+            let meshes: Vec<_> = objects
+                .iter()
+                .map(|(c, h, a, sphere)| match sphere {
+                    Some(n) => globe(*c, h[0], *n),
+                    None => turned_box(*c, *h, *a),
+                })
+                .collect();
+            let inside = meshes.iter().any(|m| through(m, eye, eye + DVec3::splat(1e-9)));
             proptest::prop_assume!(!inside);
             let base = camera(ortho);
             let cam = Camera::new(eye, DVec3::ZERO, DVec3::Y, base.projection(), 400, 400, 1, 0.01, 100.0).unwrap();
-            let objects: Vec<_> = boxes.iter().map(|(c, h, a)| turned_box(*c, *h, *a)).collect();
-            let s = scene(cam, &objects);
+            let s = scene(cam, &meshes);
             let d = roberts_lines(&s, &LinesOptions { hidden: true, ..LinesOptions::default() }).unwrap();
             let mut checked = 0;
             for seg in &d.segments {
@@ -796,15 +977,15 @@ mod tests {
                     }
                     let x = seg.p[0] + (seg.p[1] - seg.p[0]) * u;
                     let sight = if ortho { x - cam.forward() * cam.view_depth(x) } else { eye };
-                    let count = boxes
+                    let count = meshes
                         .iter()
                         .enumerate()
-                        .filter(|&(i, (c, h, a))| i != own && through_box(*c, *h, *a, x, sight))
+                        .filter(|&(i, m)| i != own && through(m, x, sight))
                         .count();
                     checked += 1;
                     proptest::prop_assert_eq!(
                         count, seg.qi as usize,
-                        "piece {:?} at u {}: {} boxes in front, QI {}", seg.s, u, count, seg.qi
+                        "piece {:?} at u {}: {} objects in front, QI {}", seg.s, u, count, seg.qi
                     );
                 }
             }
