@@ -1,6 +1,6 @@
 //! Hidden lines: Appel's quantitative invisibility against Roberts'
 //! algorithm on the same scenes as the edges grow, on one thread: a k×k
-//! grid of boxes (k = 2 … 16: the objects grow with the edges) and a 3×3
+//! grid of boxes (k = 2 … 32: the objects grow with the edges) and a 3×3
 //! grid of superellipsoids ⟨0.5, 0.8⟩ at growing tessellation (nine
 //! objects, more edges each). Appel's time includes its BVH, Roberts' its
 //! convexity checks, as `rendiff lines` measures them. The scenes are
@@ -116,7 +116,7 @@ fn counts(label: &str, job: &Prepared) {
     );
 }
 
-const GRID: &[u32] = &[2, 4, 8, 16];
+const GRID: &[u32] = &[2, 4, 8, 16, 32];
 const SEGMENTS: &[u32] = &[16, 32, 64, 128, 256];
 
 fn appel(bencher: Bencher, job: &Prepared) {

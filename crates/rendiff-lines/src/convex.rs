@@ -41,7 +41,7 @@ use std::fmt;
 use rendiff_core::math::{DVec3, gamma64, to_f64};
 use rendiff_core::tri_scene::TriScene;
 
-use crate::EdgeEntry;
+use super::EdgeEntry;
 
 /// An object Roberts' algorithm cannot take: which, and why.
 #[derive(Clone, Debug, PartialEq)]
@@ -108,7 +108,7 @@ pub(crate) fn degenerate(v: [DVec3; 3], n: DVec3, rho: f64) -> bool {
 }
 
 /// Checks that object `object`, whose mesh edges (with their triangles,
-/// as [`crate::mesh_edges`] finds them) are `edges`, is a convex
+/// as [`mesh_edges`](super::mesh_edges) finds them) are `edges`, is a convex
 /// polyhedron (the module's five conditions) with vertex rounding `rho`.
 ///
 /// # Errors
@@ -370,7 +370,7 @@ pub(crate) mod tests {
 
     fn check(s: &TriScene) -> Result<(), NotConvex> {
         let rho = vertex_rounding(largest_coordinate(s));
-        let edges = edges_by_object(s, &crate::mesh_edges(s));
+        let edges = edges_by_object(s, &super::super::mesh_edges(s));
         (0..u32::try_from(s.objects.len()).unwrap())
             .try_for_each(|o| check_convex(s, o, &edges[o as usize], rho))
     }

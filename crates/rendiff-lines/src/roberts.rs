@@ -1,7 +1,7 @@
 //! Roberts' hidden-line algorithm (1963) for scenes of convex polyhedra.
 //!
 //! 1. **Convexity**: every object must be a closed convex polyhedron
-//!    ([`crate::convex`]); otherwise the drawing is refused, naming it.
+//!    ([`convex`](super::convex)); otherwise the drawing is refused, naming it.
 //! 2. **Back-face culling**: per object, the triangles facing the eye.
 //!    The edges drawn are Appel's (silhouettes and creases, the same
 //!    classification and near-plane clipping), less those between two
@@ -26,7 +26,8 @@
 //!    then the *relevant faces*: the front faces whose screen boxes meet
 //!    the part of the edge left by the silhouette planes (the face a sight
 //!    line enters P through contains the point's image, so the others
-//!    cannot change the answer).
+//!    cannot change the answer), looked up in a screen grid of P's front
+//!    faces along that part.
 //! 5. **Union**: the hidden intervals of all polyhedra, with how many
 //!    polyhedra hide each piece (its QI: on a convex scene, the number of
 //!    front faces in front of it, what Appel counts); the pieces with none
@@ -35,7 +36,7 @@
 //! **Tolerance δ.** A point within rounding of a bounding plane counts as
 //! not behind it, so edges lying in another object's face plane (touching
 //! boxes, an edge ending on a face) or grazing a silhouette plane stay
-//! visible. δ is the bound of [`crate::convex`] on the error rounding the
+//! visible. δ is the bound of [`convex`](super::convex) on the error rounding the
 //! vertices to f32 puts into the plane at the point, ρ·(1 + Σ|barycentric
 //! coordinates|) plus the f64 arithmetic, for the plane's own corners (the
 //! eye and the view direction are exact); it is a convex function along
@@ -55,17 +56,17 @@ use rendiff_core::camera::{Camera, Projection};
 use rendiff_core::math::{DVec3, gamma64, to_f64};
 use rendiff_core::tri_scene::TriScene;
 
-use crate::convex::{
+use super::convex::{
     NotConvex, centroid, check_convex, edges_by_object, largest_coordinate, object_vertices,
     vertex_rounding,
 };
-use crate::{
+use super::{
     Base, Drawing, Edge, EdgeEntry, LinesOptions, LinesStats, Segment, lerp3, merge, mesh_edges,
 };
 
 /// Draws the visible edges of a scene of convex polyhedra by Roberts'
 /// algorithm: the same edges, classification, segment type and writers as
-/// [`crate::hidden_lines`]. With `verify`, every piece's QI is recounted by
+/// [`hidden_lines`](super::hidden_lines). With `verify`, every piece's QI is recounted by
 /// a ray (through a BVH built for the purpose), as for Appel's.
 ///
 /// # Errors
@@ -625,9 +626,9 @@ fn project(cam: &Camera, p: DVec3, fallback: (f64, f64)) -> (f64, f64) {
 
 #[cfg(test)]
 mod tests {
+    use super::super::convex::tests::{camera, cuboid, scene};
+    use super::super::{EdgeKind, hidden_lines};
     use super::*;
-    use crate::convex::tests::{camera, cuboid, scene};
-    use crate::{EdgeKind, hidden_lines};
     use rendiff_core::math::Vec3;
 
     fn dump(d: &Drawing) -> String {
