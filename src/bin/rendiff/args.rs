@@ -214,6 +214,18 @@ pub struct LinesArgs {
     /// Image size, overriding the scene's [image] (e.g. 640x480).
     #[arg(long, value_name = "WxH", value_parser = parse_size)]
     pub size: Option<(u32, u32)>,
+    /// The hidden-line method.
+    #[arg(long, value_enum, default_value_t = MethodArg::Appel, value_name = "METHOD")]
+    pub method: MethodArg,
+}
+
+/// A hidden-line method, as the command line names it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum MethodArg {
+    /// Appel's quantitative invisibility (any scene).
+    Appel,
+    /// Roberts' algorithm (scenes of convex polyhedra only).
+    Roberts,
 }
 
 /// `rendiff bench`.

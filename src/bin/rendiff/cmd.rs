@@ -147,7 +147,8 @@ fn warn_job(job: &Prepared) {
 }
 
 fn lines(a: &LinesArgs) -> Result<Outcome> {
-    use rendiff::lines::{LinesOptions, hidden_lines, to_rgba, to_svg};
+    use crate::args::MethodArg;
+    use rendiff::lines::{LinesOptions, hidden_lines, roberts_lines, to_rgba, to_svg};
     let ext = a
         .output
         .extension()
@@ -176,16 +177,21 @@ fn lines(a: &LinesArgs) -> Result<Outcome> {
     check_output_dir(&a.output)?;
     refuse_inputs(&a.output, &job.scene.input_files())?;
     let start = std::time::Instant::now();
-    let accel = rendiff::accel::Accel::new(&job.tri, rendiff::accel::AccelOptions::default());
-    let d = hidden_lines(
-        &job.tri,
-        &accel,
-        &LinesOptions {
-            crease_deg: a.crease,
-            hidden: a.hidden,
-            verify: false,
-        },
-    );
+    let opts = LinesOptions {
+        crease_deg: a.crease,
+        hidden: a.hidden,
+        verify: false,
+    };
+    let d = match a.method {
+        MethodArg::Appel => {
+            let accel =
+                rendiff::accel::Accel::new(&job.tri, rendiff::accel::AccelOptions::default());
+            hidden_lines(&job.tri, &accel, &opts)
+        }
+        MethodArg::Roberts => {
+            roberts_lines(&job.tri, &opts).with_context(|| a.scene.display().to_string())?
+        }
+    };
     let ms = start.elapsed().as_secs_f64() * 1e3;
     if ext.as_deref() == Some("svg") {
         let svg = to_svg(&d);
@@ -196,13 +202,20 @@ fn lines(a: &LinesArgs) -> Result<Outcome> {
         rendiff::image_io::write_png_rgba8(&a.output, d.width, d.height, &to_rgba(&d))?;
     }
     let s = d.stats;
+    let work = match a.method {
+        MethodArg::Appel => format!(
+            "{} drawn ({} contours), {} QI changes",
+            s.drawn_edges, s.contours, s.qi_changes
+        ),
+        MethodArg::Roberts => format!(
+            "{} drawn ({} culled with back faces); {} convex objects, {} edge-object pairs ({} rejected by bounding boxes), {} plane clips",
+            s.drawn_edges, s.culled, s.objects, s.pairs, s.box_rejected, s.plane_tests
+        ),
+    };
     say(&format!(
-        "{}: {} edges, {} drawn ({} contours), {} QI changes; {} visible and {} hidden pieces in {ms:.1} ms -> {}\n",
+        "{}: {} edges, {work}; {} visible and {} hidden pieces in {ms:.1} ms -> {}\n",
         a.scene.display(),
         s.edges,
-        s.drawn_edges,
-        s.contours,
-        s.qi_changes,
         s.visible,
         s.hidden,
         a.output.display()
