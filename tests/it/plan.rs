@@ -418,7 +418,7 @@ fn rays_cast_stay_within_the_seeds_ray_tree_bound() {
         assert!(o.status.success(), "{scene}: {text}");
         let tree = text
             .lines()
-            .find(|l| l.trim_start().starts_with("ray tree"))
+            .find(|l| l.trim_start().starts_with("ray tree") && l.contains("of at most"))
             .unwrap_or_else(|| panic!("{scene}: no ray tree row:\n{text}"));
         assert!(tree.contains("N·(2ⁿ − 1)"), "{tree}");
         let nums: Vec<u64> = tree
