@@ -9,20 +9,28 @@ use std::path::Path;
 use crate::util::root;
 
 /// Replays every kept input and past crash of one target through `run`.
-fn replay(name: &str, run: impl Fn(&[u8])) {
+/// The inputs are spread over the machine's threads (the scene corpus is
+/// the suite's longest test); every failing file is named.
+fn replay(name: &str, run: impl Fn(&[u8]) + Sync) {
+    use rayon::prelude::*;
     let corpus = files(&root().join("fuzz/corpus").join(name));
     let crashes = files(&root().join("fuzz/artifacts").join(name));
     assert!(!corpus.is_empty(), "{name}: no corpus");
-    for f in corpus.iter().chain(&crashes) {
-        let data = match std::fs::read(f) {
-            Ok(d) => d,
-            // A running fuzzer replaces corpus files as it reduces them.
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => continue,
-            Err(e) => panic!("{}: {e}", f.display()),
-        };
-        let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| run(&data)));
-        assert!(outcome.is_ok(), "{name}: {} fails", f.display());
-    }
+    let all: Vec<&std::path::PathBuf> = corpus.iter().chain(&crashes).collect();
+    let failed: Vec<String> = all
+        .par_iter()
+        .filter_map(|f| {
+            let data = match std::fs::read(f) {
+                Ok(d) => d,
+                // A running fuzzer replaces corpus files as it reduces them.
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => return None,
+                Err(e) => return Some(format!("{}: {e}", f.display())),
+            };
+            let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| run(&data)));
+            outcome.is_err().then(|| format!("{} fails", f.display()))
+        })
+        .collect();
+    assert!(failed.is_empty(), "{name}: {}", failed.join("; "));
     eprintln!(
         "{name}: {} corpus inputs, {} past crashes replayed",
         corpus.len(),
