@@ -5,6 +5,7 @@
 //! rendiff-peers embree [SCENE.toml] [--subdivide K] [--repeats N]
 //! rendiff-peers povray [SCENE.toml ...] [--threads 1,2] [--repeats N]
 //! rendiff-peers llvmpipe [--repeats N]
+//! rendiff-peers objload [--repeats N]
 //! ```
 //!
 //! `summary` (what `make peers` runs): every comparison below plus the
@@ -95,7 +96,7 @@ fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let Some(cmd) = args.first() else {
         bail!(
-            "usage: rendiff-peers summary [--repeats N] | embree [SCENE] [--subdivide K] [--repeats N] | povray [SCENE...] [--threads 1,2] [--repeats N] | llvmpipe [--repeats N]"
+            "usage: rendiff-peers summary [--repeats N] | embree [SCENE] [--subdivide K] [--repeats N] | povray [SCENE...] [--threads 1,2] [--repeats N] | llvmpipe [--repeats N] | objload [--repeats N]"
         );
     };
     let rest = &args[1..];
@@ -121,8 +122,11 @@ fn main() -> Result<()> {
             povray_cmp(&scenes, &threads, repeats).map(|_| ())
         }
         "summary" => summary::summary(repeats),
+        "objload" => summary::obj_load(repeats).map(|_| ()),
         "llvmpipe" => llvmpipe::compare(repeats).map(|_| ()),
-        other => bail!("unknown command {other:?}: expected summary, embree, povray or llvmpipe"),
+        other => bail!(
+            "unknown command {other:?}: expected summary, embree, povray, llvmpipe or objload"
+        ),
     }
 }
 

@@ -260,14 +260,14 @@ fn whole_process(scene: &Path, repeats: usize) -> Result<(f64, f64)> {
 /// Loading and tessellating a 177 k-triangle OBJ: the bundled dragon
 /// (11 102 triangles) split twice into four, written as a plain `v`/`f`
 /// file. Returns (ms, MB, triangles).
-fn obj_load(repeats: usize) -> Result<(f64, f64, usize)> {
+pub fn obj_load(repeats: usize) -> Result<(f64, f64, usize)> {
     let work = std::env::temp_dir().join(format!("rendiff-obj-{}", std::process::id()));
     std::fs::create_dir_all(&work)?;
     let toml = work.join("load.toml");
     let scene_text = |file: &str| {
         format!(
-            "[image]\nwidth = 320\nheight = 240\n\n[camera]\neye = [0.0, 0.4, 3.0]\nlook_at = [0.0, 0.3, 0.0]\n\n\
-             [[lights]]\nkind = \"point\"\nposition = [2.0, 4.0, 4.0]\n\n\
+            "[image]\nwidth = 320\nheight = 240\n\n[camera]\neye = [0.0, 0.4, 3.0]\nlook_at = [0.0, 0.3, 0.0]\nup = [0.0, 1.0, 0.0]\nfov_y = 30.0\n\n\
+             [[lights]]\nkind = \"point\"\nposition = [2.0, 4.0, 4.0]\ncolor = [1.0, 1.0, 1.0]\n\n\
              [materials.jade]\npigment = [0.35, 0.7, 0.45]\n\n\
              [[objects]]\nkind = \"mesh\"\nfile = \"{file}\"\nmaterial = \"jade\"\n"
         )
