@@ -14,7 +14,7 @@
 
 use glam::Vec4;
 
-use super::triangle::{RayPrecomp, TriHit, TriPack, candidates, f32_at_least, intersect};
+use super::triangle::{RayPrecomp, TriHit, TriPack, WalkRay, candidates, f32_at_least, intersect};
 use rendiff_core::math::{Aabb, DVec3, Ray64, Vec3, gamma, to_f64};
 
 /// Child slot encoding: the high bit marks a leaf.
@@ -556,11 +556,14 @@ impl Bvh {
         }
     }
 
-    /// The farthest `t` at which `ray` can meet a triangle of the tree:
-    /// the distance to the far side of the bounds' bounding sphere.
+    /// The farthest `t` at which `ray` can meet a triangle of the tree: a
+    /// bound on the distance to the far side of the bounds' bounding
+    /// sphere (the L1 norm of the offset from its centre is never below
+    /// the Euclidean one, and needs no square root).
+    #[inline]
     fn reach(&self, ray: &Ray64) -> f64 {
         let (c, r) = self.sphere;
-        (ray.origin - c).length() + r
+        (ray.origin - c).abs().element_sum() + r
     }
 
     /// The closest hit with `t` in `[ray.t_min, ray.t_max]`; equal `t`
@@ -568,12 +571,14 @@ impl Bvh {
     /// triangle id.
     #[must_use]
     pub(crate) fn intersect(&self, ray: &Ray64) -> Option<BvhHit> {
-        let pre = RayPrecomp::new(ray, self.reach(ray));
+        let walk = WalkRay::new(ray, self.reach(ray));
+        let mut pre: Option<RayPrecomp> = None;
         let mut best: Option<BvhHit> = None;
-        let (t_min, mut best_t) = pre.t_range();
-        let mut t_prune = pre.ray.t_max;
-        self.traverse(&pre, &mut t_prune, true, |first, t_prune| {
-            self.leaf_hits(&pre, first, t_min, &mut best_t, |id, h, best_t| {
+        let (t_min, mut best_t) = (ray.t_min, ray.t_max);
+        let mut t_prune = walk.ray.t_max;
+        self.traverse(&walk, &mut t_prune, true, |first, t_prune| {
+            let pre = pre.get_or_insert_with(|| RayPrecomp::of(ray, &walk));
+            self.leaf_hits(pre, first, t_min, &mut best_t, |id, h, best_t| {
                 offer(&mut best, best_t, id, h);
                 false
             });
@@ -588,11 +593,13 @@ impl Bvh {
     /// `[ray.t_min, ray.t_max]`, in no particular order; stops when `visit`
     /// returns `true`.
     pub(crate) fn for_each_hit(&self, ray: &Ray64, mut visit: impl FnMut(u32, TriHit) -> bool) {
-        let pre = RayPrecomp::new(ray, self.reach(ray));
-        let mut t_prune = pre.ray.t_max;
-        let (t_min, mut t_max) = pre.t_range();
-        self.traverse(&pre, &mut t_prune, false, |first, _| {
-            self.leaf_hits(&pre, first, t_min, &mut t_max, |id, h, _| visit(id, h))
+        let walk = WalkRay::new(ray, self.reach(ray));
+        let mut pre: Option<RayPrecomp> = None;
+        let mut t_prune = walk.ray.t_max;
+        let (t_min, mut t_max) = (ray.t_min, ray.t_max);
+        self.traverse(&walk, &mut t_prune, false, |first, _| {
+            let pre = pre.get_or_insert_with(|| RayPrecomp::of(ray, &walk));
+            self.leaf_hits(pre, first, t_min, &mut t_max, |id, h, _| visit(id, h))
         });
     }
 
@@ -636,7 +643,7 @@ impl Bvh {
     #[inline]
     fn traverse(
         &self,
-        pre: &RayPrecomp,
+        walk: &WalkRay,
         t_max: &mut f32,
         ordered: bool,
         mut leaf: impl FnMut(usize, &mut f32) -> bool,
@@ -648,7 +655,7 @@ impl Bvh {
             leaf((self.root & !LEAF) as usize, t_max);
             return;
         }
-        let slab = Slab::new(pre);
+        let slab = Slab::new(walk);
         let grow = Slab::GROW;
         // The stack holds (t_near bits << 32 | child). A visit pops one
         // entry and pushes at most three (the nearest child is descended
@@ -779,31 +786,31 @@ impl Slab {
     const GROW: f32 = 1.0 + 2.0 * gamma(3);
 
     #[inline]
-    fn new(pre: &RayPrecomp) -> Slab {
-        let ray = &pre.ray;
-        let safe = |d: f32| {
-            if d.abs() < 1e-30 {
-                1e-30f32.copysign(d)
-            } else {
-                d
-            }
+    fn new(walk: &WalkRay) -> Slab {
+        let ray = &walk.ray;
+        let o = Vec4::new(ray.origin.x, ray.origin.y, ray.origin.z, 0.0);
+        let d = Vec4::new(ray.dir.x, ray.dir.y, ray.dir.z, 1.0);
+        let tiny = Vec4::splat(1e-30);
+        let d = Vec4::select(d.abs().cmplt(tiny), tiny.copysign(d), d);
+        let inv = Vec4::ONE / d;
+        let (lo, hi) = if walk.inflate == 0.0 {
+            (o, o)
+        } else {
+            // Each coordinate moved by at least `inflate` whatever the
+            // rounding of the move: `fl(o ± s)` is within half an ulp of
+            // `|o| + s` of the exact sum, which the `2⁻²²·|o|` term and
+            // the relative margin on `inflate` cover (and `MIN_POSITIVE`
+            // the subnormal range).
+            let s = Vec4::splat(walk.inflate * (1.0 + 1.0 / 1_048_576.0))
+                + o.abs() * (1.0 / 4_194_304.0)
+                + Vec4::splat(f32::MIN_POSITIVE);
+            (o + s, o - s)
         };
-        let e = pre.inflate;
-        let shift = |o: f32, up: bool| {
-            if e == 0.0 {
-                o
-            } else if up {
-                (o + e).next_up()
-            } else {
-                (o - e).next_down()
-            }
-        };
-        let o = ray.origin.to_array();
-        let d = ray.dir.to_array();
+        let lanes = |v: Vec4| [Vec4::splat(v.x), Vec4::splat(v.y), Vec4::splat(v.z)];
         Slab {
-            lo: o.map(|o| Vec4::splat(shift(o, true))),
-            hi: o.map(|o| Vec4::splat(shift(o, false))),
-            inv: d.map(|d| Vec4::splat(1.0 / safe(d))),
+            lo: lanes(lo),
+            hi: lanes(hi),
+            inv: lanes(inv),
             t_min: Vec4::splat(ray.t_min),
         }
     }
@@ -901,7 +908,7 @@ mod tests {
     /// The closest hit by testing every triangle (ties to the lower id).
     fn linear(tris: &[[Vec3; 3]], ray: &Ray64, reach: f64) -> Option<(u32, f64)> {
         let pre = RayPrecomp::new(ray, reach);
-        let (t_min, t_max) = pre.t_range();
+        let (t_min, t_max) = (ray.t_min, ray.t_max);
         let mut best: Option<(u32, f64)> = None;
         for (id, v) in tris.iter().enumerate() {
             if let Some(h) = intersect(&pre, v, t_min, t_max) {
@@ -1064,7 +1071,7 @@ mod tests {
                 });
                 all.sort_unstable();
                 let pre = RayPrecomp::new(&ray, bvh.reach(&ray));
-                let (t_min, t_max) = pre.t_range();
+                let (t_min, t_max) = (ray.t_min, ray.t_max);
                 let every: Vec<u32> = (0..u32::try_from(n).unwrap())
                     .filter(|&id| intersect(&pre, &tris[id as usize], t_min, t_max).is_some())
                     .collect();

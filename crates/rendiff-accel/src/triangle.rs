@@ -67,24 +67,62 @@ const GAMMA_10: f32 = 10.0 * F32_EPS / (1.0 - 10.0 * F32_EPS);
 /// relative error bounds do not hold): such edges always go to `f64`.
 const MIN_TRUSTED: f32 = 1e-30;
 
-/// Per-ray constants of the watertight test: the `f64` ray that decides,
-/// and the nearest `f32` ray that filters and walks the BVH.
+/// The `f32` ray that walks the BVH for an `f64` ray, and how far the two
+/// stray apart: all a ray needs until it reaches a leaf. The triangle
+/// test's constants ([`RayPrecomp`]) are derived from it only then, so a
+/// ray that meets no leaf (most primary rays of a frame with background)
+/// never computes them.
 #[derive(Clone, Copy, Debug)]
-pub(crate) struct RayPrecomp {
+pub(crate) struct WalkRay {
     /// The `f32` ray nearest to the `f64` one (`t_min` rounded down,
     /// `t_max` up).
     pub ray: Ray,
     /// How far the `f32` ray strays from the `f64` one up to the
     /// farthest `t` that matters (boxes are inflated by this).
     pub inflate: f32,
+    /// The distance between the two origins (largest coordinate).
+    dorigin: f64,
+}
+
+impl WalkRay {
+    /// The `f32` ray of `ray`; `t_bound` is the farthest `t` at which the
+    /// ray can still meet anything (it bounds the drift between the `f64`
+    /// ray and its `f32` copy).
+    #[must_use]
+    #[inline]
+    pub(crate) fn new(ray: &Ray64, t_bound: f64) -> WalkRay {
+        let d = to_f32(ray.dir);
+        let o = to_f32(ray.origin);
+        // The two rays apart: origins by `do`, directions by `dd` per unit
+        // t (largest components by `max`, which has no branch; `dd·t` is
+        // NaN only for 0·∞, which the last `max` turns into 0).
+        let largest = |v: DVec3| v.x.max(v.y).max(v.z);
+        let dorigin = largest((to_f64(o) - ray.origin).abs());
+        let ddir = largest((to_f64(d) - ray.dir).abs());
+        let reach = (ddir * t_bound.min(ray.t_max).max(0.0)).max(0.0);
+        WalkRay {
+            ray: Ray {
+                origin: o,
+                dir: d,
+                t_min: f32_at_most(ray.t_min),
+                t_max: f32_at_least(ray.t_max),
+            },
+            inflate: f32_at_least((dorigin + reach) * (1.0 + 1e-6)),
+            dorigin,
+        }
+    }
+}
+
+/// Per-ray constants of the watertight test: the `f64` ray that decides,
+/// and the shear of the nearest `f32` ray ([`WalkRay`]) that filters.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct RayPrecomp {
     /// Axis permutation: the dominant axis of the direction is `kz`.
     pub k: [usize; 3],
     /// The `f64` origin.
     origin64: DVec3,
     /// Shear constants of the `f64` direction (permuted by `k`).
     s64: [f64; 3],
-    /// The `f64` bounds of `t`.
-    t64: (f64, f64),
     /// The `f32` origin's coordinates, each in four lanes (for [`candidates`]).
     o4: [Vec4; 3],
     /// The `f32` `Sx` and `Sy` in four lanes.
@@ -95,12 +133,19 @@ pub(crate) struct RayPrecomp {
 
 impl RayPrecomp {
     /// Precomputes the permutation and shear of a ray; `t_bound` is the
-    /// farthest `t` at which the ray can still meet anything (it bounds the
-    /// drift between the `f64` ray and its `f32` copy).
+    /// farthest `t` at which the ray can still meet anything (see
+    /// [`WalkRay::new`]).
+    #[cfg(test)]
     #[must_use]
     pub(crate) fn new(ray: &Ray64, t_bound: f64) -> RayPrecomp {
-        let d = to_f32(ray.dir);
-        let o = to_f32(ray.origin);
+        RayPrecomp::of(ray, &WalkRay::new(ray, t_bound))
+    }
+
+    /// The permutation and shear of `ray`, whose `f32` copy is `walk`.
+    #[must_use]
+    pub(crate) fn of(ray: &Ray64, walk: &WalkRay) -> RayPrecomp {
+        let d = walk.ray.dir;
+        let o = walk.ray.origin;
         let ad = d.abs();
         let kz = if ad.x > ad.y {
             if ad.x > ad.z { 0 } else { 2 }
@@ -117,38 +162,15 @@ impl RayPrecomp {
         }
         let s = Vec3::new(d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]);
         let d64 = ray.dir;
-        // The two rays apart: origins by `do`, directions by `dd` per unit t.
-        let dorigin = (to_f64(o) - ray.origin).abs().max_element();
-        let ddir = (to_f64(d) - d64).abs().max_element();
-        let reach = if ddir == 0.0 {
-            0.0
-        } else {
-            ddir * t_bound.min(ray.t_max).max(0.0)
-        };
-        let inflate = f32_at_least((dorigin + reach) * (1.0 + 1e-6));
-        let m_shift = f32_at_least(2.0 * dorigin / f64::from(GAMMA_10));
+        let m_shift = f32_at_least(2.0 * walk.dorigin / f64::from(GAMMA_10));
         RayPrecomp {
-            ray: Ray {
-                origin: o,
-                dir: d,
-                t_min: f32_at_most(ray.t_min),
-                t_max: f32_at_least(ray.t_max),
-            },
-            inflate,
             k: [kx, ky, kz],
             origin64: ray.origin,
             s64: [d64[kx] / d64[kz], d64[ky] / d64[kz], 1.0 / d64[kz]],
-            t64: (ray.t_min, ray.t_max),
             o4: [Vec4::splat(o.x), Vec4::splat(o.y), Vec4::splat(o.z)],
             s4: [Vec4::splat(s.x), Vec4::splat(s.y)],
             m_shift: Vec4::splat(m_shift),
         }
-    }
-
-    /// The `f64` bounds of `t`.
-    #[must_use]
-    pub(crate) fn t_range(&self) -> (f64, f64) {
-        self.t64
     }
 }
 
@@ -313,6 +335,15 @@ pub(crate) fn intersect(pre: &RayPrecomp, v: &[Vec3; 3], t_min: f64, t_max: f64)
 
 /// The smallest `f32` not below `t` (a traversal bound that never cuts off
 /// a hit at `t`).
+///
+/// Without branches (a ray's bounds and inflation fall either way at
+/// random, and a mispredicted branch costs more than the whole test): the
+/// rounding `r` and its successor are both formed and one is selected.
+/// The successor is one step of the bit pattern away from zero for
+/// `r ≥ +0` and toward zero for `r < 0` (`r = −∞` steps to `−f32::MAX`);
+/// it is chosen only when `r < t`, so never for `r = +∞`, NaN, or a `−0`
+/// (which only a `t ≤ 0` rounds to). Exactly `r.next_up()` where chosen
+/// (a unit test holds it to that).
 #[must_use]
 #[inline]
 pub(crate) fn f32_at_least(t: f64) -> f32 {
@@ -321,10 +352,17 @@ pub(crate) fn f32_at_least(t: f64) -> f32 {
         reason = "rounded, then corrected upward"
     )]
     let r = t as f32;
-    if f64::from(r) < t { r.next_up() } else { r }
+    let bits = r.to_bits();
+    let up = f32::from_bits(if r.is_sign_negative() {
+        bits.wrapping_sub(1)
+    } else {
+        bits.wrapping_add(1)
+    });
+    if f64::from(r) < t { up } else { r }
 }
 
-/// The largest `f32` not above `t`.
+/// The largest `f32` not above `t` (branch-free as [`f32_at_least`]:
+/// exactly `r.next_down()` where the rounding `r` lies above `t`).
 #[must_use]
 #[inline]
 pub(crate) fn f32_at_most(t: f64) -> f32 {
@@ -333,7 +371,13 @@ pub(crate) fn f32_at_most(t: f64) -> f32 {
         reason = "rounded, then corrected downward"
     )]
     let r = t as f32;
-    if f64::from(r) > t { r.next_down() } else { r }
+    let bits = r.to_bits();
+    let down = f32::from_bits(if r.is_sign_negative() {
+        bits.wrapping_add(1)
+    } else {
+        bits.wrapping_sub(1)
+    });
+    if f64::from(r) > t { down } else { r }
 }
 
 #[cfg(test)]
@@ -346,6 +390,62 @@ pub(crate) fn f32_at_most(t: f64) -> f32 {
 )]
 mod tests {
     use super::*;
+
+    /// The branch-free roundings are exactly "round, then step with
+    /// `next_up`/`next_down` where the rounding fell on the wrong side",
+    /// at the edges of the format (zeros, subnormals, the largest finite,
+    /// infinities, NaN) and on values between every pair of neighbours.
+    #[test]
+    fn directed_roundings_match_next_up_and_next_down() {
+        let reference_up = |t: f64| {
+            let r = t as f32;
+            if f64::from(r) < t { r.next_up() } else { r }
+        };
+        let reference_down = |t: f64| {
+            let r = t as f32;
+            if f64::from(r) > t { r.next_down() } else { r }
+        };
+        let mut values = vec![
+            0.0,
+            -0.0,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+            f64::from(f32::MAX),
+            -f64::from(f32::MAX),
+            f64::from(f32::MAX) * (1.0 + 1e-9),
+            -f64::from(f32::MAX) * (1.0 + 1e-9),
+            f64::MAX,
+            -f64::MAX,
+            1e-300,
+            -1e-300,
+            f64::from(f32::MIN_POSITIVE),
+            f64::from(f32::from_bits(1)),
+            f64::from(f32::from_bits(1)) * 0.5,
+            f64::from(f32::from_bits(1)) * 0.25,
+            -f64::from(f32::from_bits(1)) * 0.25,
+        ];
+        let mut z = 0x1234_5678_9abc_def0u64;
+        for _ in 0..20_000 {
+            z = z
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            let f = f32::from_bits((z >> 32) as u32);
+            if f.is_finite() {
+                let next = f.next_up();
+                values.extend([f64::from(f), (f64::from(f) + f64::from(next)) / 2.0]);
+                values.push(f64::from(f) + (f64::from(next) - f64::from(f)) * 1e-3);
+            }
+        }
+        for t in values {
+            let (up, down) = (f32_at_least(t), f32_at_most(t));
+            assert_eq!(up.to_bits(), reference_up(t).to_bits(), "at least {t:e}");
+            assert_eq!(down.to_bits(), reference_down(t).to_bits(), "at most {t:e}");
+            if !t.is_nan() {
+                assert!(f64::from(up) >= t && f64::from(down) <= t, "{t:e}");
+            }
+        }
+    }
 
     fn ray(o: Vec3, d: Vec3) -> Ray {
         Ray {
