@@ -303,14 +303,12 @@ impl Camera {
     }
     /// `width / height`.
     #[must_use]
-    #[inline]
     pub fn aspect(&self) -> f64 {
         f64::from(self.width) / f64::from(self.height)
     }
 
     /// The screen point of sample `(sx, sy)` of the sample grid.
     #[must_use]
-    #[inline]
     pub fn sample_point(&self, sx: u32, sy: u32) -> (f64, f64) {
         let n = f64::from(self.samples);
         ((f64::from(sx) + 0.5) / n, (f64::from(sy) + 0.5) / n)
@@ -318,7 +316,6 @@ impl Camera {
 
     /// Normalised screen coordinates `(sx, sy)` in `[-1, 1]` (y up).
     #[must_use]
-    #[inline]
     pub fn ndc(&self, x: f64, y: f64) -> (f64, f64) {
         (
             2.0 * x / f64::from(self.width) - 1.0,
@@ -330,7 +327,6 @@ impl Camera {
     /// `(x, y)`, in `f64`; the ray starts at the eye (perspective) or on the
     /// plane through the eye (orthographic).
     #[must_use]
-    #[inline]
     pub fn primary_ray_f64(&self, x: f64, y: f64) -> (DVec3, DVec3) {
         let (sx, sy) = self.ndc(x, y);
         match self.projection {
@@ -349,7 +345,6 @@ impl Camera {
     /// Parameter `t` at which the primary ray with direction `dir` crosses
     /// the near plane.
     #[must_use]
-    #[inline]
     pub fn near_t(&self, dir: DVec3) -> f64 {
         match self.projection {
             Projection::Perspective { .. } => self.near / dir.dot(self.f),
@@ -360,7 +355,6 @@ impl Camera {
     /// Parameter `t` at which the primary ray with direction `dir` crosses
     /// the far plane.
     #[must_use]
-    #[inline]
     pub fn far_t(&self, dir: DVec3) -> f64 {
         match self.projection {
             Projection::Perspective { .. } => self.far / dir.dot(self.f),
@@ -372,7 +366,6 @@ impl Camera {
     /// backend uses: unit direction, from the near plane to the far plane
     /// (DESIGN.md §2: surfaces beyond either are not seen).
     #[must_use]
-    #[inline]
     pub fn primary_ray(&self, x: f64, y: f64) -> Ray {
         self.primary_ray64(x, y).to_f32()
     }
@@ -382,7 +375,6 @@ impl Camera {
     /// plane (the rasterizer projects with the same ray; the `f32` ray of
     /// [`Camera::primary_ray`] is its rounding, for shading).
     #[must_use]
-    #[inline]
     pub fn primary_ray64(&self, x: f64, y: f64) -> Ray64 {
         let (o, d) = self.primary_ray_f64(x, y);
         Ray64 {
@@ -403,7 +395,6 @@ impl Camera {
     /// The `f64` primary ray of sample `(sx, sy)` of the sample grid (as the
     /// ray tracer casts it).
     #[must_use]
-    #[inline]
     pub fn sample_ray64(&self, sx: u32, sy: u32) -> Ray64 {
         let (x, y) = self.sample_point(sx, sy);
         self.primary_ray64(x, y)
@@ -411,7 +402,6 @@ impl Camera {
 
     /// View depth `(p − eye)·f`.
     #[must_use]
-    #[inline]
     pub fn view_depth(&self, p: DVec3) -> f64 {
         (p - self.eye).dot(self.f)
     }
@@ -419,7 +409,6 @@ impl Camera {
     /// Depth of a visible point as the frame stores it: `t` along the unit
     /// primary ray (perspective: distance from the eye; orthographic: view depth).
     #[must_use]
-    #[inline]
     pub fn frame_depth(&self, p: DVec3) -> f64 {
         match self.projection {
             Projection::Perspective { .. } => (p - self.eye).length(),

@@ -88,7 +88,6 @@ impl Ray64 {
     /// The `f32` ray nearest to this one: each part rounded once (so the
     /// `f32` primary ray of a camera is its `f64` ray's rounding).
     #[must_use]
-    #[inline]
     pub fn to_f32(&self) -> Ray {
         #[expect(clippy::cast_possible_truncation, reason = "the one rounding to f32")]
         Ray {
@@ -421,14 +420,12 @@ impl Transform {
     clippy::cast_possible_truncation,
     reason = "the one deliberate f64 -> f32 rounding of geometry"
 )]
-#[inline]
 pub fn to_f32(v: DVec3) -> Vec3 {
     Vec3::new(v.x as f32, v.y as f32, v.z as f32)
 }
 
 /// Widens an `f32` vector to `f64` exactly.
 #[must_use]
-#[inline]
 pub fn to_f64(v: Vec3) -> DVec3 {
     DVec3::new(f64::from(v.x), f64::from(v.y), f64::from(v.z))
 }
