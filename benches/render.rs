@@ -93,6 +93,34 @@ fn primary_rays_940k_1080p(bencher: Bencher, threads: usize) {
     });
 }
 
+/// The camera's f64 primary rays of a 1080p frame, one thread: each ray
+/// formed from the camera alone (`Camera::sample_ray64`, four divisions on
+/// its path) against the per-frame tables both backends use
+/// (`SampleRays`, the same rays bit for bit), summed so none is skipped.
+#[divan::bench(consts = [false, true], sample_count = 10)]
+fn camera_rays_1080p<const TABLES: bool>(bencher: Bencher) {
+    use rendiff::camera::SampleRays;
+    let cam = bunny().1.camera;
+    let (w, h) = (cam.sample_width(), cam.sample_height());
+    bencher
+        .counter(ItemsCount::new((w * h) as usize))
+        .with_inputs(|| SampleRays::new(&cam))
+        .bench_refs(|rays| {
+            let mut acc = 0.0;
+            for y in 0..h {
+                for x in 0..w {
+                    let r = if TABLES {
+                        rays.ray(x, y)
+                    } else {
+                        cam.sample_ray64(x, y)
+                    };
+                    acc += r.dir.x + r.t_min;
+                }
+            }
+            black_box(acc)
+        });
+}
+
 /// One shadow ray toward the light from every visible point.
 #[divan::bench(args = THREADS, sample_count = 5)]
 fn shadow_rays_940k_1080p(bencher: Bencher, threads: usize) {

@@ -33,6 +33,7 @@ fn traced(
         AccelOptions {
             geometry: Geometry::Mesh,
             bvh: job.plan.bvh,
+            ..AccelOptions::default()
         },
     );
     let opts = RayOptions {

@@ -120,6 +120,7 @@ fn against(
                 AccelOptions {
                     geometry,
                     bvh: true,
+                    ..AccelOptions::default()
                 },
             );
             rendiff::ray::render(

@@ -1,11 +1,15 @@
-//! A 4-wide bounding volume hierarchy over triangles.
+//! An 8-wide bounding volume hierarchy over triangles.
 //!
 //! Build: a binary tree by binned SAH (Wald 2007: 16 bins per axis over the
 //! centroid bounds, object-median splits where every centroid coincides),
 //! split in parallel with `rayon::join` above 4096 primitives, then
-//! collapsed into 4-wide nodes (each node adopts the grandchildren of its
+//! collapsed into 8-wide nodes (each node adopts the grandchildren of its
 //! largest inner children) with their child boxes stored as structure-of-
-//! arrays `Vec4`s, so one node visit tests four boxes with SSE.
+//! arrays `Vec4`s, so one node visit tests eight boxes in two groups of four.
+//!
+//! The queries are compiled twice through `pulp` (the walk and the triangle
+//! tests inlined into each copy): for the target's baseline (SSE2) and for
+//! x86-64-v3 (AVX2), chosen at run time; both give the same hits bit for bit.
 //!
 //! Traversal: ordered (nearest child first) with a precomputed inverse
 //! direction; `t_far` of every box is enlarged by `1 + 2γ(3)` (Ize 2013,
@@ -13,7 +17,9 @@
 //! finds exactly the hits a linear scan finds.
 
 use glam::Vec4;
+use pulp::WithSimd;
 
+use super::SimdPath;
 use super::triangle::{RayPrecomp, TriHit, TriPack, WalkRay, candidates, f32_at_least, intersect};
 use rendiff_core::math::{Aabb, DVec3, Ray64, Vec3, gamma, to_f64};
 
@@ -31,29 +37,33 @@ const TRAVERSAL_COST: f32 = 1.0;
 /// Subtrees larger than this are built in parallel.
 const PARALLEL_THRESHOLD: usize = 4096;
 
-/// A 4-wide node.
+/// Groups of four child boxes in a node (one SSE test each).
+const HALVES: usize = 2;
+/// Children of a node.
+const WIDTH: usize = 4 * HALVES;
+
+/// A node of `WIDTH` children, their boxes in groups of four lanes.
 #[derive(Clone, Copy, Debug)]
-pub(crate) struct Node4 {
-    min_x: Vec4,
-    max_x: Vec4,
-    min_y: Vec4,
-    max_y: Vec4,
-    min_z: Vec4,
-    max_z: Vec4,
+#[repr(C, align(64))]
+pub(crate) struct Node {
+    min_x: [Vec4; HALVES],
+    max_x: [Vec4; HALVES],
+    min_y: [Vec4; HALVES],
+    max_y: [Vec4; HALVES],
+    min_z: [Vec4; HALVES],
+    max_z: [Vec4; HALVES],
     /// Inner node index, `LEAF | first pack` or `EMPTY`.
-    child: [u32; 4],
+    child: [u32; WIDTH],
     /// Bit k set when child k exists: an empty slot's box (all +∞) would
     /// pass the slab test for a ray with positive direction components
     /// and no far bound.
     used: u32,
-    /// Padding: a node is two 64-byte cache lines.
-    _pad: [u32; 3],
 }
 
 /// The BVH: nodes and triangle data in leaf order.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct Bvh {
-    nodes: Vec<Node4>,
+    nodes: Vec<Node>,
     /// The root: an inner node index or a leaf encoding.
     root: u32,
     root_count: u32,
@@ -69,6 +79,8 @@ pub(crate) struct Bvh {
     /// margin of [`Bvh::reach`]), computed once.
     sphere: (DVec3, f64),
     depth: u32,
+    /// The instruction set the queries run with (see [`SimdPath`]).
+    arch: pulp::Arch,
 }
 
 /// Statistics of a built BVH.
@@ -76,11 +88,11 @@ pub(crate) struct Bvh {
 pub struct BvhStats {
     /// Triangles.
     pub triangles: usize,
-    /// 4-wide nodes.
+    /// 8-wide nodes.
     pub nodes: usize,
     /// Leaves.
     pub leaves: usize,
-    /// Depth in 4-wide nodes.
+    /// Depth in 8-wide nodes.
     pub depth: u32,
     /// Bytes held (nodes + triangle copies + ids).
     pub bytes: usize,
@@ -165,6 +177,18 @@ impl BNode {
             BNode::Leaf { bounds, .. } | BNode::Inner { bounds, .. } => *bounds,
         }
     }
+
+    /// The packs of four triangles the leaves below fill, and the inner
+    /// binary nodes (at least the 8-wide nodes they collapse into).
+    fn packs_and_inner(&self) -> (usize, usize) {
+        match self {
+            BNode::Leaf { count, .. } => (count.div_ceil(4), 0),
+            BNode::Inner { children, .. } => {
+                let (a, b) = (children[0].packs_and_inner(), children[1].packs_and_inner());
+                (a.0 + b.0, a.1 + b.1 + 1)
+            }
+        }
+    }
 }
 
 /// What leaf emission needs: the ids in leaf order and the vertices.
@@ -207,87 +231,17 @@ fn build_binary(
         return leaf;
     }
     let extent = cbounds.hi - cbounds.lo;
-    // Binned SAH over the three axes at once: one pass over the primitives.
-    // Small nodes use half the bins (the sweep, not the binning, dominates there).
-    let nb = if n > 64 { BINS } else { BINS / 2 };
-    #[expect(clippy::cast_precision_loss, reason = "nb ≤ 16")]
-    let nbf = nb as f32;
-    let scale = Vec4::new(
-        if extent.x > 0.0 { nbf / extent.x } else { 0.0 },
-        if extent.y > 0.0 { nbf / extent.y } else { 0.0 },
-        if extent.z > 0.0 { nbf / extent.z } else { 0.0 },
-        0.0,
-    );
-    // Two sets of bins, for even and odd primitives, merged afterwards:
-    // neighbours often fall in the same bin, and one set would chain every
-    // update to the previous one through memory.
-    let mut bin_bounds = [[[Box4::EMPTY; BINS]; 3]; 2];
-    let mut bin_count = [[[0u32; BINS]; 3]; 2];
-    let mut pairs = prims.chunks_exact(2);
-    for pair in &mut pairs {
-        let (p, q) = (&pair[0], &pair[1]);
-        let bp = bins_of(p.centroid2(), cbounds.lo, scale, nb);
-        let bq = bins_of(q.centroid2(), cbounds.lo, scale, nb);
-        for axis in 0..3 {
-            bin_bounds[0][axis][bp[axis]].grow(p.lo, p.hi);
-            bin_count[0][axis][bp[axis]] += 1;
-            bin_bounds[1][axis][bq[axis]].grow(q.lo, q.hi);
-            bin_count[1][axis][bq[axis]] += 1;
-        }
-    }
-    for p in pairs.remainder() {
-        let b = bins_of(p.centroid2(), cbounds.lo, scale, nb);
-        for axis in 0..3 {
-            bin_bounds[0][axis][b[axis]].grow(p.lo, p.hi);
-            bin_count[0][axis][b[axis]] += 1;
-        }
-    }
-    let [mut bin_bounds, odd_bounds] = bin_bounds;
-    let [mut bin_count, odd_count] = bin_count;
-    for axis in 0..3 {
-        for b in 0..nb {
-            let o = odd_bounds[axis][b];
-            bin_bounds[axis][b].grow(o.lo, o.hi);
-            bin_count[axis][b] += odd_count[axis][b];
-        }
-    }
-    // Triangles are tested four at a time: a leaf costs its packs.
+    // Small nodes use half the bins (the sweep, not the binning, dominates
+    // there), in arrays of that size: setting up the bins of a node is a
+    // fixed cost, and most nodes are small.
+    let (nb, scale, best) = if n > 64 {
+        best_split::<BINS>(prims, (bounds, cbounds), extent)
+    } else {
+        best_split::<{ BINS / 2 }>(prims, (bounds, cbounds), extent)
+    };
     #[expect(clippy::cast_precision_loss, reason = "pack counts below 2^24")]
     let packs = |k: u32| k.div_ceil(4) as f32;
     let leaf_cost = packs(u32::try_from(n).unwrap_or(u32::MAX));
-    let parent_area = bounds.half_area().max(f32::MIN_POSITIVE);
-    let mut best: Option<(usize, usize, f32)> = None; // axis, split bin, cost
-    for axis in 0..3 {
-        if extent[axis] <= 0.0 || !extent[axis].is_finite() {
-            continue;
-        }
-        // Sweep from the right, then from the left.
-        let mut right_area = [0.0f32; BINS];
-        let mut right_count = [0u32; BINS];
-        let mut acc = Box4::EMPTY;
-        let mut cnt = 0;
-        for b in (1..nb).rev() {
-            acc.grow(bin_bounds[axis][b].lo, bin_bounds[axis][b].hi);
-            cnt += bin_count[axis][b];
-            right_area[b] = acc.half_area();
-            right_count[b] = cnt;
-        }
-        let mut acc = Box4::EMPTY;
-        let mut cnt = 0;
-        for b in 1..nb {
-            acc.grow(bin_bounds[axis][b - 1].lo, bin_bounds[axis][b - 1].hi);
-            cnt += bin_count[axis][b - 1];
-            if cnt == 0 || right_count[b] == 0 {
-                continue;
-            }
-            let cost = TRAVERSAL_COST
-                + (acc.half_area() * packs(cnt) + right_area[b] * packs(right_count[b]))
-                    / parent_area;
-            if best.is_none_or(|(_, _, c)| cost < c) {
-                best = Some((axis, b, cost));
-            }
-        }
-    }
     let best = if depth >= SAH_DEPTH_LIMIT && n > MAX_LEAF {
         None
     } else {
@@ -326,6 +280,95 @@ fn build_binary(
         bounds: bounds.aabb(),
         children: Box::new([l, r]),
     }
+}
+
+/// The binned SAH split of a node: `NB` bins per axis over the centroid
+/// bounds, all three axes in one pass over the primitives. Returns `NB`,
+/// the bins' scale per axis and the best (axis, split bin, cost), `None`
+/// when no axis has two non-empty sides.
+fn best_split<const NB: usize>(
+    prims: &[PrimRef],
+    (bounds, cbounds): (Box4, Box4),
+    extent: Vec4,
+) -> (usize, Vec4, Option<(usize, usize, f32)>) {
+    #[expect(clippy::cast_precision_loss, reason = "NB ≤ 16")]
+    let nbf = NB as f32;
+    let scale = Vec4::new(
+        if extent.x > 0.0 { nbf / extent.x } else { 0.0 },
+        if extent.y > 0.0 { nbf / extent.y } else { 0.0 },
+        if extent.z > 0.0 { nbf / extent.z } else { 0.0 },
+        0.0,
+    );
+    // Two sets of bins, for even and odd primitives, merged afterwards:
+    // neighbours often fall in the same bin, and one set would chain every
+    // update to the previous one through memory.
+    let mut bin_bounds = [[[Box4::EMPTY; NB]; 3]; 2];
+    let mut bin_count = [[[0u32; NB]; 3]; 2];
+    let mut pairs = prims.chunks_exact(2);
+    for pair in &mut pairs {
+        let (p, q) = (&pair[0], &pair[1]);
+        let bp = bins_of(p.centroid2(), cbounds.lo, scale, NB);
+        let bq = bins_of(q.centroid2(), cbounds.lo, scale, NB);
+        for axis in 0..3 {
+            bin_bounds[0][axis][bp[axis]].grow(p.lo, p.hi);
+            bin_count[0][axis][bp[axis]] += 1;
+            bin_bounds[1][axis][bq[axis]].grow(q.lo, q.hi);
+            bin_count[1][axis][bq[axis]] += 1;
+        }
+    }
+    for p in pairs.remainder() {
+        let b = bins_of(p.centroid2(), cbounds.lo, scale, NB);
+        for axis in 0..3 {
+            bin_bounds[0][axis][b[axis]].grow(p.lo, p.hi);
+            bin_count[0][axis][b[axis]] += 1;
+        }
+    }
+    let [mut bin_bounds, odd_bounds] = bin_bounds;
+    let [mut bin_count, odd_count] = bin_count;
+    for axis in 0..3 {
+        for b in 0..NB {
+            let o = odd_bounds[axis][b];
+            bin_bounds[axis][b].grow(o.lo, o.hi);
+            bin_count[axis][b] += odd_count[axis][b];
+        }
+    }
+    // Triangles are tested four at a time: a leaf costs its packs.
+    #[expect(clippy::cast_precision_loss, reason = "pack counts below 2^24")]
+    let packs = |k: u32| k.div_ceil(4) as f32;
+    let parent_area = bounds.half_area().max(f32::MIN_POSITIVE);
+    let mut best: Option<(usize, usize, f32)> = None; // axis, split bin, cost
+    for axis in 0..3 {
+        if extent[axis] <= 0.0 || !extent[axis].is_finite() {
+            continue;
+        }
+        // Sweep from the right, then from the left.
+        let mut right_area = [0.0f32; NB];
+        let mut right_count = [0u32; NB];
+        let mut acc = Box4::EMPTY;
+        let mut cnt = 0;
+        for b in (1..NB).rev() {
+            acc.grow(bin_bounds[axis][b].lo, bin_bounds[axis][b].hi);
+            cnt += bin_count[axis][b];
+            right_area[b] = acc.half_area();
+            right_count[b] = cnt;
+        }
+        let mut acc = Box4::EMPTY;
+        let mut cnt = 0;
+        for b in 1..NB {
+            acc.grow(bin_bounds[axis][b - 1].lo, bin_bounds[axis][b - 1].hi);
+            cnt += bin_count[axis][b - 1];
+            if cnt == 0 || right_count[b] == 0 {
+                continue;
+            }
+            let cost = TRAVERSAL_COST
+                + (acc.half_area() * packs(cnt) + right_area[b] * packs(right_count[b]))
+                    / parent_area;
+            if best.is_none_or(|(_, _, c)| cost < c) {
+                best = Some((axis, b, cost));
+            }
+        }
+    }
+    (NB, scale, best)
 }
 
 /// The bin of a (doubled) centroid on each axis, below `nb`.
@@ -426,6 +469,11 @@ impl Bvh {
             order: &order,
             tri: &tri,
         };
+        // The packs are known before they are written: no growth, no copies.
+        let (packs, inner) = tree.packs_and_inner();
+        bvh.packs.reserve_exact(packs);
+        bvh.ids.reserve_exact(4 * packs);
+        bvh.nodes.reserve(inner);
         match &tree {
             BNode::Leaf { start, count, .. } => {
                 bvh.root = LEAF | bvh.emit_leaf(&leaves, *start, *count);
@@ -477,8 +525,8 @@ impl Bvh {
         slot: usize,
         leaves: &Leaves<'_, F>,
     ) -> u32 {
-        // Gather up to four children by opening the largest inner child.
-        let mut kids: [&BNode; 4] = [node; 4];
+        // Gather up to WIDTH children by opening the largest inner child.
+        let mut kids: [&BNode; WIDTH] = [node; WIDTH];
         let mut len = match node {
             BNode::Inner { children, .. } => {
                 kids[0] = &children[0];
@@ -487,7 +535,7 @@ impl Bvh {
             }
             BNode::Leaf { .. } => 1,
         };
-        while len < 4 {
+        while len < WIDTH {
             let mut open = None;
             let mut best_area = f32::NEG_INFINITY;
             for (i, k) in kids[..len].iter().enumerate() {
@@ -509,7 +557,7 @@ impl Bvh {
         }
         let mut n = empty_node();
         let mut depth = 0;
-        let mut pending: [(usize, usize); 4] = [(0, 0); 4];
+        let mut pending: [(usize, usize); WIDTH] = [(0, 0); WIDTH];
         let mut np = 0;
         for (k, kid) in kids[..len].iter().enumerate() {
             let b = kid.bounds();
@@ -550,7 +598,7 @@ impl Bvh {
             nodes: self.nodes.len(),
             leaves,
             depth: self.depth,
-            bytes: self.nodes.len() * std::mem::size_of::<Node4>()
+            bytes: self.nodes.len() * std::mem::size_of::<Node>()
                 + self.packs.len() * std::mem::size_of::<TriPack>()
                 + self.ids.len() * 4,
         }
@@ -560,7 +608,7 @@ impl Bvh {
     /// bound on the distance to the far side of the bounds' bounding
     /// sphere (the L1 norm of the offset from its centre is never below
     /// the Euclidean one, and needs no square root).
-    #[inline]
+    #[inline(always)]
     fn reach(&self, ray: &Ray64) -> f64 {
         let (c, r) = self.sphere;
         (ray.origin - c).abs().element_sum() + r
@@ -571,6 +619,43 @@ impl Bvh {
     /// triangle id.
     #[must_use]
     pub(crate) fn intersect(&self, ray: &Ray64) -> Option<BvhHit> {
+        self.arch.dispatch(Closest { bvh: self, ray })
+    }
+
+    /// Calls `visit(id, hit)` for every triangle hit with `t` in
+    /// `[ray.t_min, ray.t_max]`, in no particular order; stops when `visit`
+    /// returns `true`.
+    pub(crate) fn for_each_hit(&self, ray: &Ray64, visit: impl FnMut(u32, TriHit) -> bool) {
+        self.arch.dispatch(EachHit {
+            bvh: self,
+            ray,
+            visit,
+        });
+    }
+
+    /// The instruction set the queries run with.
+    pub(crate) fn set_simd(&mut self, path: SimdPath) {
+        self.arch = match path {
+            SimdPath::Auto => pulp::Arch::new(),
+            SimdPath::Baseline => pulp::Arch::Scalar,
+        };
+    }
+
+    /// The instruction set the queries run with: `"x86-64-v3"` (AVX2,
+    /// found at run time) or `"baseline"` (the target's own, SSE2 on x86-64).
+    pub(crate) fn simd_name(&self) -> &'static str {
+        match self.arch {
+            pulp::Arch::Scalar => "baseline",
+            #[cfg(target_arch = "x86_64")]
+            pulp::Arch::V3(_) => "x86-64-v3",
+            #[allow(unreachable_patterns, reason = "the variants differ by target")]
+            _ => "other",
+        }
+    }
+
+    /// [`Bvh::intersect`], compiled into each instruction set's copy.
+    #[inline(always)]
+    fn closest(&self, ray: &Ray64) -> Option<BvhHit> {
         let walk = WalkRay::new(ray, self.reach(ray));
         let mut pre: Option<RayPrecomp> = None;
         let mut best: Option<BvhHit> = None;
@@ -589,10 +674,9 @@ impl Bvh {
         best
     }
 
-    /// Calls `visit(id, hit)` for every triangle hit with `t` in
-    /// `[ray.t_min, ray.t_max]`, in no particular order; stops when `visit`
-    /// returns `true`.
-    pub(crate) fn for_each_hit(&self, ray: &Ray64, mut visit: impl FnMut(u32, TriHit) -> bool) {
+    /// [`Bvh::for_each_hit`], compiled into each instruction set's copy.
+    #[inline(always)]
+    fn each_hit(&self, ray: &Ray64, mut visit: impl FnMut(u32, TriHit) -> bool) {
         let walk = WalkRay::new(ray, self.reach(ray));
         let mut pre: Option<RayPrecomp> = None;
         let mut t_prune = walk.ray.t_max;
@@ -607,7 +691,7 @@ impl Bvh {
     /// for the edge test ([`candidates`]), then the survivors one by one
     /// in `f64`; `hit(id, hit, t_max)` may shrink `t_max` and returns
     /// `true` to stop.
-    #[inline]
+    #[inline(always)]
     fn leaf_hits(
         &self,
         pre: &RayPrecomp,
@@ -640,7 +724,7 @@ impl Bvh {
     /// shrink `t_max`; returning `true` stops the walk. With `ordered`,
     /// children are visited nearest first (closest hit); without, in any
     /// order (any hit, all hits).
-    #[inline]
+    #[inline(always)]
     fn traverse(
         &self,
         walk: &WalkRay,
@@ -658,10 +742,11 @@ impl Bvh {
         let slab = Slab::new(walk);
         let grow = Slab::GROW;
         // The stack holds (t_near bits << 32 | child). A visit pops one
-        // entry and pushes at most three (the nearest child is descended
-        // into directly), so 3·depth + 1 entries suffice; the usual trees
-        // fit the small array, which is cheap to set up per ray.
-        let need = 3 * self.depth as usize + 1;
+        // entry and pushes at most WIDTH − 1 (the nearest child is
+        // descended into directly), so (WIDTH − 1)·depth + 1 entries
+        // suffice; the usual trees fit the small array, which is cheap to
+        // set up per ray.
+        let need = (WIDTH - 1) * self.depth as usize + 1;
         let mut small = [0u64; 64];
         let mut big = Vec::new();
         let stack: &mut [u64] = if need <= small.len() {
@@ -689,7 +774,7 @@ impl Bvh {
                         node = n.child[near];
                         continue;
                     }
-                    let mut rest = [0usize; 3];
+                    let mut rest = [0usize; WIDTH - 1];
                     let mut m = 0;
                     while mask != 0 {
                         let k = mask.trailing_zeros() as usize;
@@ -741,9 +826,41 @@ impl Bvh {
     }
 }
 
+/// A closest-hit query as a `pulp` operation: the walk and the triangle
+/// tests are inlined into it, so each instruction set gets its own copy.
+struct Closest<'a> {
+    bvh: &'a Bvh,
+    ray: &'a Ray64,
+}
+
+impl WithSimd for Closest<'_> {
+    type Output = Option<BvhHit>;
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _: S) -> Self::Output {
+        self.bvh.closest(self.ray)
+    }
+}
+
+/// An every-hit query as a `pulp` operation (see [`Closest`]).
+struct EachHit<'a, F> {
+    bvh: &'a Bvh,
+    ray: &'a Ray64,
+    visit: F,
+}
+
+impl<F: FnMut(u32, TriHit) -> bool> WithSimd for EachHit<'_, F> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _: S) {
+        self.bvh.each_hit(self.ray, self.visit);
+    }
+}
+
 /// The closest-hit rule of every query: a hit replaces the best when it is
 /// nearer (in `f64`), or as near with a lower triangle id.
-#[inline]
+#[inline(always)]
 fn offer(best: &mut Option<BvhHit>, best_t: &mut f64, id: u32, h: TriHit) {
     let better = match *best {
         None => true,
@@ -785,7 +902,7 @@ impl Slab {
     /// rounding never culls a box the ray enters (Ize 2013, pbrt-v4).
     const GROW: f32 = 1.0 + 2.0 * gamma(3);
 
-    #[inline]
+    #[inline(always)]
     fn new(walk: &WalkRay) -> Slab {
         let ray = &walk.ray;
         let o = Vec4::new(ray.origin.x, ray.origin.y, ray.origin.z, 0.0);
@@ -817,50 +934,57 @@ impl Slab {
 
     /// The children of `n` whose boxes the ray enters before `t_max` (a bit
     /// mask), and the `t_near` of each lane.
-    #[inline]
-    fn test(&self, n: &Node4, t_max: f32) -> (u32, [f32; 4]) {
+    #[inline(always)]
+    fn test(&self, n: &Node, t_max: f32) -> (u32, [f32; WIDTH]) {
         let [ox0, oy0, oz0] = self.lo;
         let [ox1, oy1, oz1] = self.hi;
         let [ix, iy, iz] = self.inv;
-        let tx0 = (n.min_x - ox0) * ix;
-        let tx1 = (n.max_x - ox1) * ix;
-        let ty0 = (n.min_y - oy0) * iy;
-        let ty1 = (n.max_y - oy1) * iy;
-        let tz0 = (n.min_z - oz0) * iz;
-        let tz1 = (n.max_z - oz1) * iz;
-        let tn = tx0
-            .min(tx1)
-            .max(ty0.min(ty1))
-            .max(tz0.min(tz1))
-            .max(self.t_min);
-        let tf = tx0.max(tx1).min(ty0.max(ty1)).min(tz0.max(tz1)) * Slab::GROW;
-        let tf = tf.min(Vec4::splat(t_max * Slab::GROW));
-        (tn.cmple(tf).bitmask() & n.used, tn.to_array())
+        let far = Vec4::splat(t_max * Slab::GROW);
+        let mut mask = 0;
+        let mut t_near = [0.0; WIDTH];
+        for h in 0..HALVES {
+            let tx0 = (n.min_x[h] - ox0) * ix;
+            let tx1 = (n.max_x[h] - ox1) * ix;
+            let ty0 = (n.min_y[h] - oy0) * iy;
+            let ty1 = (n.max_y[h] - oy1) * iy;
+            let tz0 = (n.min_z[h] - oz0) * iz;
+            let tz1 = (n.max_z[h] - oz1) * iz;
+            let tn = tx0
+                .min(tx1)
+                .max(ty0.min(ty1))
+                .max(tz0.min(tz1))
+                .max(self.t_min);
+            let tf = tx0.max(tx1).min(ty0.max(ty1)).min(tz0.max(tz1)) * Slab::GROW;
+            let tf = tf.min(far);
+            mask |= tn.cmple(tf).bitmask() << (4 * h);
+            t_near[4 * h..4 * h + 4].copy_from_slice(&tn.to_array());
+        }
+        (mask & n.used, t_near)
     }
 }
 
-fn empty_node() -> Node4 {
-    let inf = Vec4::splat(f32::INFINITY);
-    Node4 {
+fn empty_node() -> Node {
+    let inf = [Vec4::splat(f32::INFINITY); HALVES];
+    Node {
         min_x: inf,
         max_x: inf,
         min_y: inf,
         max_y: inf,
         min_z: inf,
         max_z: inf,
-        child: [EMPTY; 4],
+        child: [EMPTY; WIDTH],
         used: 0,
-        _pad: [0; 3],
     }
 }
 
-fn set_lane(n: &mut Node4, k: usize, b: Aabb) {
-    n.min_x[k] = b.min.x;
-    n.max_x[k] = b.max.x;
-    n.min_y[k] = b.min.y;
-    n.max_y[k] = b.max.y;
-    n.min_z[k] = b.min.z;
-    n.max_z[k] = b.max.z;
+fn set_lane(n: &mut Node, k: usize, b: Aabb) {
+    let (h, l) = (k / 4, k % 4);
+    n.min_x[h][l] = b.min.x;
+    n.max_x[h][l] = b.max.x;
+    n.min_y[h][l] = b.min.y;
+    n.max_y[h][l] = b.max.y;
+    n.min_z[h][l] = b.min.z;
+    n.max_z[h][l] = b.max.z;
 }
 
 #[cfg(test)]
@@ -931,7 +1055,7 @@ mod tests {
                 return;
             }
             let n = &bvh.nodes[c as usize];
-            for k in 0..4 {
+            for k in 0..WIDTH {
                 if n.used & (1 << k) != 0 {
                     below(bvh, n.child[k], leaf_ids, out);
                 }
@@ -960,13 +1084,14 @@ mod tests {
             }
         };
         for n in &bvh.nodes {
-            for k in 0..4 {
+            for k in 0..WIDTH {
                 if n.used & (1 << k) == 0 {
                     assert_eq!(n.child[k], EMPTY, "an unused slot names a child");
                     continue;
                 }
-                let lo = Vec3::new(n.min_x[k], n.min_y[k], n.min_z[k]);
-                let hi = Vec3::new(n.max_x[k], n.max_y[k], n.max_z[k]);
+                let (h, l) = (k / 4, k % 4);
+                let lo = Vec3::new(n.min_x[h][l], n.min_y[h][l], n.min_z[h][l]);
+                let hi = Vec3::new(n.max_x[h][l], n.max_y[h][l], n.max_z[h][l]);
                 if n.child[k] & LEAF != 0 {
                     assert!(leaf_ids(n.child[k]).len() <= MAX_LEAF, "leaf too long");
                 }

@@ -29,6 +29,8 @@ pub struct AccelOptions {
     pub geometry: Geometry,
     /// A BVH (`true`) or one flat leaf (`false`).
     pub bvh: bool,
+    /// The instruction set of the ray queries.
+    pub simd: SimdPath,
 }
 
 impl Default for AccelOptions {
@@ -36,8 +38,23 @@ impl Default for AccelOptions {
         AccelOptions {
             geometry: Geometry::Mesh,
             bvh: true,
+            simd: SimdPath::Auto,
         }
     }
+}
+
+/// The instruction set the ray queries (the walk of the tree and the
+/// triangle tests) run with. Every path gives the same hits, bit for bit:
+/// the arithmetic is IEEE single and double precision either way, with
+/// no fused multiply-adds (a test renders every scene on each path).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum SimdPath {
+    /// The best the processor has, found at run time: on x86-64 with
+    /// AVX2 (x86-64-v3), code compiled for it; else the baseline.
+    #[default]
+    Auto,
+    /// The target's baseline instruction set (SSE2 on x86-64).
+    Baseline,
 }
 
 /// How a primitive acts on a shadow ray.
@@ -93,7 +110,8 @@ impl<'s> Accel<'s> {
         let ids: Vec<u32> = (0..u32::try_from(scene.len()).unwrap_or(u32::MAX))
             .filter(|&t| !analytic_object[scene.tri_object[t as usize] as usize])
             .collect();
-        let bvh = Bvh::build(&ids, |id| scene.triangle(id), !opts.bvh);
+        let mut bvh = Bvh::build(&ids, |id| scene.triangle(id), !opts.bvh);
+        bvh.set_simd(opts.simd);
         let class_of = |object: u32, material: u16| {
             if scene.objects[object as usize].no_shadow {
                 ShadowClass::None
@@ -135,6 +153,13 @@ impl<'s> Accel<'s> {
     #[must_use]
     pub fn stats(&self) -> BvhStats {
         self.bvh.stats()
+    }
+
+    /// The instruction set the ray queries run with: `"x86-64-v3"` or
+    /// `"baseline"` (see [`SimdPath`]).
+    #[must_use]
+    pub fn simd(&self) -> &'static str {
+        self.bvh.simd_name()
     }
 
     /// The closest hit in `[ray.t_min, ray.t_max]` (ties: lower id), on the

@@ -89,7 +89,7 @@ impl WalkRay {
     /// ray can still meet anything (it bounds the drift between the `f64`
     /// ray and its `f32` copy).
     #[must_use]
-    #[inline]
+    #[inline(always)]
     pub(crate) fn new(ray: &Ray64, t_bound: f64) -> WalkRay {
         let d = to_f32(ray.dir);
         let o = to_f32(ray.origin);
@@ -198,7 +198,7 @@ impl TriPack {
 
     /// The triangle in `lane`.
     #[must_use]
-    #[inline]
+    #[inline(always)]
     pub(crate) fn triangle(&self, lane: usize) -> [Vec3; 3] {
         self.v
             .map(|c| Vec3::new(c[0][lane], c[1][lane], c[2][lane]))
@@ -222,7 +222,7 @@ impl TriPack {
 /// the hits, and the rays within rounding of an edge — is decided by
 /// [`intersect`].
 #[must_use]
-#[inline]
+#[inline(always)]
 pub(crate) fn candidates(pre: &RayPrecomp, pack: &TriPack) -> u32 {
     let [kx, ky, kz] = pre.k;
     let [sx, sy] = pre.s4;
@@ -277,7 +277,7 @@ pub struct TriHit {
 /// equal distances by triangle id sees every tie) and `t` beyond the
 /// test's own rounding error of `t`.
 #[must_use]
-#[inline]
+#[inline(always)]
 #[expect(clippy::similar_names, reason = "the paper's names")]
 pub(crate) fn intersect(pre: &RayPrecomp, v: &[Vec3; 3], t_min: f64, t_max: f64) -> Option<TriHit> {
     let [kx, ky, kz] = pre.k;
@@ -345,7 +345,7 @@ pub(crate) fn intersect(pre: &RayPrecomp, v: &[Vec3; 3], t_min: f64, t_max: f64)
 /// (which only a `t ≤ 0` rounds to). Exactly `r.next_up()` where chosen
 /// (a unit test holds it to that).
 #[must_use]
-#[inline]
+#[inline(always)]
 pub(crate) fn f32_at_least(t: f64) -> f32 {
     #[expect(
         clippy::cast_possible_truncation,
@@ -364,7 +364,7 @@ pub(crate) fn f32_at_least(t: f64) -> f32 {
 /// The largest `f32` not above `t` (branch-free as [`f32_at_least`]:
 /// exactly `r.next_down()` where the rounding `r` lies above `t`).
 #[must_use]
-#[inline]
+#[inline(always)]
 pub(crate) fn f32_at_most(t: f64) -> f32 {
     #[expect(
         clippy::cast_possible_truncation,

@@ -35,7 +35,7 @@ use rayon::prelude::*;
 
 use clip::{HVert, clip_polygon, planes};
 use rendiff_accel::{Accel, AccelOptions, ShadowRays};
-use rendiff_core::camera::Projection;
+use rendiff_core::camera::{Projection, SampleRays};
 use rendiff_core::coverage::{FillRule, SampleGrid, SnappedTri, Sub8, bbox_samples, doubled_area};
 use rendiff_core::frame::{BACKGROUND, Frame, Sample};
 use rendiff_core::math::{DVec3, to_f64};
@@ -966,6 +966,7 @@ fn shade_pass(
         _ => None,
     };
     let mut frame = Frame::new(cam.width(), cam.height(), cam.samples(), scene.background);
+    let cam_rays = SampleRays::new(cam);
     let w = sw as usize;
     let shadow_rays: u64 = frame
         .par_bands(1, |band| {
@@ -984,8 +985,7 @@ fn shade_pass(
                 }
                 // The weights the ray tracer shades with: the f64 camera
                 // ray of this sample against the visible triangle.
-                let (x, y) = cam.sample_point(sx, sy);
-                let ray64 = cam.primary_ray64(x, y);
+                let ray64 = cam_rays.ray(sx, sy);
                 let (b, p64) = scene.view_weights(tri, ray64.origin, ray64.dir);
                 let sp = scene.surface_at(tri, b);
                 let ray = ray64.to_f32();

@@ -21,6 +21,7 @@
 #![warn(missing_docs, missing_debug_implementations)]
 
 use rendiff_accel::{Accel, Hit, ShadowRays};
+use rendiff_core::camera::SampleRays;
 use rendiff_core::color::Rgb;
 use rendiff_core::frame::{Frame, Sample};
 use rendiff_core::math::{DVec3, Ray, Ray64, Vec3, to_f64};
@@ -183,6 +184,8 @@ struct Tracer<'a, 's> {
     /// Back faces counted (and culled with [`Faces::Front`]); `None`: the
     /// plain path, nothing counted.
     faces: Option<Faces>,
+    /// The camera's primary rays.
+    rays: SampleRays,
 }
 
 /// Renders a scene with the given accelerator.
@@ -241,6 +244,7 @@ fn render_with(
         max_depth: opts.max_depth.max(1),
         eye_inside,
         faces,
+        rays: SampleRays::new(cam),
     };
     let sw = cam.sample_width();
     // Bands of TILE sample rows, each traced in TILE×TILE tiles (coherent
@@ -284,15 +288,14 @@ fn render_with(
 impl Tracer<'_, '_> {
     fn sample(&self, sx: u32, sy: u32, w: &mut Worker<'_, '_>) -> Sample {
         let cam = &self.scene.camera;
-        let (x, y) = cam.sample_point(sx, sy);
-        let ray64 = cam.primary_ray64(x, y);
+        let ray64 = self.rays.ray(sx, sy);
         let (o64, d64) = (ray64.origin, ray64.dir);
-        // `Camera::primary_ray` is this ray rounded to f32 (one rounding
-        // of each part): derived here rather than computed again.
-        let ray = ray64.to_f32();
         let Some(hit) = self.intersect(&ray64, w) else {
             return Sample::background(self.scene.background);
         };
+        // `Camera::primary_ray` is this ray rounded to f32 (one rounding
+        // of each part): derived here rather than computed again.
+        let ray = ray64.to_f32();
         let (sp, p64) = self.surface(&hit, o64, d64);
         let shaded = shade::shade(&self.ctx, &sp, ray.dir, &w.vis);
         let mut inside = self.eye_inside.clone();

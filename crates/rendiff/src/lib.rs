@@ -400,6 +400,7 @@ impl Prepared {
                     AccelOptions {
                         geometry: self.settings.geometry,
                         bvh: self.plan.bvh,
+                        ..AccelOptions::default()
                     },
                 );
                 let max_depth = if self.plan.ray_tree { max_depth } else { 1 };
