@@ -178,15 +178,11 @@ impl BNode {
         }
     }
 
-    /// The packs of four triangles the leaves below fill, and the inner
-    /// binary nodes (at least the 8-wide nodes they collapse into).
-    fn packs_and_inner(&self) -> (usize, usize) {
+    /// The packs of four triangles the leaves below fill.
+    fn packs(&self) -> usize {
         match self {
-            BNode::Leaf { count, .. } => (count.div_ceil(4), 0),
-            BNode::Inner { children, .. } => {
-                let (a, b) = (children[0].packs_and_inner(), children[1].packs_and_inner());
-                (a.0 + b.0, a.1 + b.1 + 1)
-            }
+            BNode::Leaf { count, .. } => count.div_ceil(4),
+            BNode::Inner { children, .. } => children[0].packs() + children[1].packs(),
         }
     }
 }
@@ -239,9 +235,7 @@ fn build_binary(
     } else {
         best_split::<{ BINS / 2 }>(prims, (bounds, cbounds), extent)
     };
-    #[expect(clippy::cast_precision_loss, reason = "pack counts below 2^24")]
-    let packs = |k: u32| k.div_ceil(4) as f32;
-    let leaf_cost = packs(u32::try_from(n).unwrap_or(u32::MAX));
+    let leaf_cost = pack_cost(u32::try_from(n).unwrap_or(u32::MAX));
     let best = if depth >= SAH_DEPTH_LIMIT && n > MAX_LEAF {
         None
     } else {
@@ -280,6 +274,14 @@ fn build_binary(
         bounds: bounds.aabb(),
         children: Box::new([l, r]),
     }
+}
+
+/// The SAH cost of `k` triangles in a leaf: they are tested four at a
+/// time, so a leaf costs its packs.
+fn pack_cost(k: u32) -> f32 {
+    #[expect(clippy::cast_precision_loss, reason = "pack counts below 2^24")]
+    let packs = k.div_ceil(4) as f32;
+    packs
 }
 
 /// The binned SAH split of a node: `NB` bins per axis over the centroid
@@ -332,9 +334,6 @@ fn best_split<const NB: usize>(
             bin_count[axis][b] += odd_count[axis][b];
         }
     }
-    // Triangles are tested four at a time: a leaf costs its packs.
-    #[expect(clippy::cast_precision_loss, reason = "pack counts below 2^24")]
-    let packs = |k: u32| k.div_ceil(4) as f32;
     let parent_area = bounds.half_area().max(f32::MIN_POSITIVE);
     let mut best: Option<(usize, usize, f32)> = None; // axis, split bin, cost
     for axis in 0..3 {
@@ -361,7 +360,7 @@ fn best_split<const NB: usize>(
                 continue;
             }
             let cost = TRAVERSAL_COST
-                + (acc.half_area() * packs(cnt) + right_area[b] * packs(right_count[b]))
+                + (acc.half_area() * pack_cost(cnt) + right_area[b] * pack_cost(right_count[b]))
                     / parent_area;
             if best.is_none_or(|(_, _, c)| cost < c) {
                 best = Some((axis, b, cost));
@@ -470,10 +469,9 @@ impl Bvh {
             tri: &tri,
         };
         // The packs are known before they are written: no growth, no copies.
-        let (packs, inner) = tree.packs_and_inner();
+        let packs = tree.packs();
         bvh.packs.reserve_exact(packs);
         bvh.ids.reserve_exact(4 * packs);
-        bvh.nodes.reserve(inner);
         match &tree {
             BNode::Leaf { start, count, .. } => {
                 bvh.root = LEAF | bvh.emit_leaf(&leaves, *start, *count);
@@ -648,7 +646,7 @@ impl Bvh {
             pulp::Arch::Scalar => "baseline",
             #[cfg(target_arch = "x86_64")]
             pulp::Arch::V3(_) => "x86-64-v3",
-            #[allow(unreachable_patterns, reason = "the variants differ by target")]
+            // `pulp::Arch` is non-exhaustive, and its variants differ by target.
             _ => "other",
         }
     }
