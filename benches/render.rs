@@ -93,6 +93,44 @@ fn primary_rays_940k_1080p(bencher: Bencher, threads: usize) {
     });
 }
 
+/// The same primary rays as [`primary_rays_940k_1080p`] in 4×2 blocks
+/// (row-major within a block), one thread: each ray alone
+/// (`Accel::intersect`) against eight at a time (`Accel::intersect_packets`,
+/// the same hits bit for bit).
+#[divan::bench(consts = [false, true], sample_count = 5)]
+fn coherent_rays_940k_1080p<const PACKETS: bool>(bencher: Bencher) {
+    let t = &bunny().1;
+    let accel = Accel::new(t, AccelOptions::default());
+    let cam = &t.camera;
+    let (w, h) = (cam.sample_width(), cam.sample_height());
+    let mut rays: Vec<Ray64> = Vec::new();
+    for by in (0..h).step_by(2) {
+        for bx in (0..w).step_by(4) {
+            for y in by..(by + 2).min(h) {
+                for x in bx..(bx + 4).min(w) {
+                    rays.push(cam.sample_ray64(x, y));
+                }
+            }
+        }
+    }
+    let p = pool(1);
+    let mut hits = vec![None; rays.len()];
+    bencher
+        .counter(ItemsCount::new(rays.len()))
+        .bench_local(|| {
+            p.install(|| {
+                if PACKETS {
+                    accel.intersect_packets(&rays, &mut hits);
+                } else {
+                    for (o, r) in hits.iter_mut().zip(&rays) {
+                        *o = accel.intersect(r);
+                    }
+                }
+                black_box(hits.iter().filter(|h| h.is_some()).count())
+            })
+        });
+}
+
 /// The camera's f64 primary rays of a 1080p frame, one thread: each ray
 /// formed from the camera alone (`Camera::sample_ray64`, four divisions on
 /// its path) against the per-frame tables both backends use

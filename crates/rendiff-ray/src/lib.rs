@@ -41,6 +41,12 @@ pub struct RayOptions {
 
 /// Tile side in samples.
 const TILE: u32 = 16;
+/// A packet of primary rays: 4×2 samples of a tile.
+const BLOCK_W: u32 = 4;
+/// See [`BLOCK_W`].
+const BLOCK_H: u32 = 2;
+/// Rays in a packet.
+const BLOCK: usize = (BLOCK_W * BLOCK_H) as usize;
 
 /// Straight continuations through `ior = 1` surfaces do not use up depth
 /// (POV-Ray); this bounds them per path so no scene can recurse without end.
@@ -260,11 +266,42 @@ fn render_with(
                 cull: CullStats::default(),
             };
             let mut primary = 0u64;
+            // Within a tile, the primary rays of each 4×2 block are traced
+            // as one packet (the hits are the single-ray ones bit for bit);
+            // rays that count back faces go one by one.
+            let unset = Ray64 {
+                origin: DVec3::ZERO,
+                dir: DVec3::Z,
+                t_min: 0.0,
+                t_max: 0.0,
+            };
+            let mut rays = [unset; BLOCK];
+            let mut at = [(0u32, 0u32); BLOCK];
+            let mut hits = [None; BLOCK];
             for tx in (0..sw).step_by(TILE as usize) {
-                for dy in 0..band.rows {
-                    for sx in tx..(tx + TILE).min(sw) {
-                        band.set(sx, dy, tracer.sample(sx, band.y0 + dy, &mut w));
-                        primary += 1;
+                let tx1 = (tx + TILE).min(sw);
+                for dy in (0..band.rows).step_by(BLOCK_H as usize) {
+                    for bx in (tx..tx1).step_by(BLOCK_W as usize) {
+                        let mut n = 0;
+                        for y in dy..(dy + BLOCK_H).min(band.rows) {
+                            for sx in bx..(bx + BLOCK_W).min(tx1) {
+                                at[n] = (sx, y);
+                                rays[n] = tracer.rays.ray(sx, band.y0 + y);
+                                n += 1;
+                            }
+                        }
+                        if tracer.faces.is_none() {
+                            accel.intersect_packets(&rays[..n], &mut hits[..n]);
+                        } else {
+                            for (h, r) in hits[..n].iter_mut().zip(&rays[..n]) {
+                                *h = tracer.intersect(r, &mut w);
+                            }
+                        }
+                        for k in 0..n {
+                            let (sx, y) = at[k];
+                            band.set(sx, y, tracer.sample(&rays[k], hits[k], &mut w));
+                        }
+                        primary += n as u64;
                     }
                 }
             }
@@ -286,11 +323,12 @@ fn render_with(
 }
 
 impl Tracer<'_, '_> {
-    fn sample(&self, sx: u32, sy: u32, w: &mut Worker<'_, '_>) -> Sample {
+    /// The sample of the primary ray `ray64`, whose hit
+    /// ([`Tracer::intersect`]) is `hit`.
+    fn sample(&self, ray64: &Ray64, hit: Option<Hit>, w: &mut Worker<'_, '_>) -> Sample {
         let cam = &self.scene.camera;
-        let ray64 = self.rays.ray(sx, sy);
         let (o64, d64) = (ray64.origin, ray64.dir);
-        let Some(hit) = self.intersect(&ray64, w) else {
+        let Some(hit) = hit else {
             return Sample::background(self.scene.background);
         };
         // `Camera::primary_ray` is this ray rounded to f32 (one rounding
