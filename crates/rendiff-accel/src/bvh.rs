@@ -34,6 +34,10 @@ pub(crate) const MAX_LEAF: usize = 8;
 const BINS: usize = 16;
 /// Relative cost of a node visit against a triangle test.
 const TRAVERSAL_COST: f32 = 1.0;
+/// The least sample a large node's SAH binning takes (see [`best_split`]).
+const SAMPLED: usize = 16_384;
+/// The sparsest sample: every 8th primitive (one 64-byte line in four).
+const MAX_STRIDE: usize = 8;
 /// Subtrees larger than this are built in parallel.
 const PARALLEL_THRESHOLD: usize = 4096;
 
@@ -226,7 +230,9 @@ fn build_binary(
         start: offset,
         count: n,
     };
-    if n <= 2 {
+    // At most one pack: a split (one more node visit, and at least one
+    // pack on each side) never costs less, so the SAH would make a leaf.
+    if n <= 4 {
         return leaf;
     }
     let extent = cbounds.hi - cbounds.lo;
@@ -234,9 +240,9 @@ fn build_binary(
     // there), in arrays of that size: setting up the bins of a node is a
     // fixed cost, and most nodes are small.
     let (nb, scale, best) = if n > 64 {
-        best_split::<BINS>(prims, (bounds, cbounds), extent)
+        best_split::<BINS, 2>(prims, (bounds, cbounds), extent)
     } else {
-        best_split::<{ BINS / 2 }>(prims, (bounds, cbounds), extent)
+        best_split::<{ BINS / 2 }, 1>(prims, (bounds, cbounds), extent)
     };
     let leaf_cost = pack_cost(u32::try_from(n).unwrap_or(u32::MAX));
     let best = if depth >= SAH_DEPTH_LIMIT && n > MAX_LEAF {
@@ -291,7 +297,7 @@ fn pack_cost(k: u32) -> f32 {
 /// bounds, all three axes in one pass over the primitives. Returns `NB`,
 /// the bins' scale per axis and the best (axis, split bin, cost), `None`
 /// when no axis has two non-empty sides.
-fn best_split<const NB: usize>(
+fn best_split<const NB: usize, const SETS: usize>(
     prims: &[PrimRef],
     (bounds, cbounds): (Box4, Box4),
     extent: Vec4,
@@ -304,37 +310,35 @@ fn best_split<const NB: usize>(
         if extent.z > 0.0 { nbf / extent.z } else { 0.0 },
         0.0,
     );
-    // Two sets of bins, for even and odd primitives, merged afterwards:
-    // neighbours often fall in the same bin, and one set would chain every
-    // update to the previous one through memory.
-    let mut bin_bounds = [[[Box4::EMPTY; NB]; 3]; 2];
-    let mut bin_count = [[[0u32; NB]; 3]; 2];
-    let mut pairs = prims.chunks_exact(2);
-    for pair in &mut pairs {
-        let (p, q) = (&pair[0], &pair[1]);
+    // `SETS` sets of bins, primitive k in set k mod SETS, merged
+    // afterwards: neighbours often fall in the same bin, and one set
+    // chains every update to the previous one through memory. Small nodes
+    // take one set: their setting up and merging cost more than the chain.
+    let mut bin_bounds = [[[Box4::EMPTY; NB]; 3]; SETS];
+    let mut bin_count = [[[0u32; NB]; 3]; SETS];
+    // Large nodes are binned from every `stride`-th primitive (at least
+    // SAMPLED of them): a sample this large places the split as well, and
+    // the partition that follows is over all of them.
+    let stride = (prims.len() / SAMPLED).clamp(1, MAX_STRIDE);
+    for (k, p) in prims.iter().step_by(stride).enumerate() {
+        let set = k % SETS;
         let bp = bins_of(p.centroid2(), cbounds.lo, scale, NB);
-        let bq = bins_of(q.centroid2(), cbounds.lo, scale, NB);
         for axis in 0..3 {
-            bin_bounds[0][axis][bp[axis]].grow(p.lo, p.hi);
-            bin_count[0][axis][bp[axis]] += 1;
-            bin_bounds[1][axis][bq[axis]].grow(q.lo, q.hi);
-            bin_count[1][axis][bq[axis]] += 1;
+            bin_bounds[set][axis][bp[axis]].grow(p.lo, p.hi);
+            bin_count[set][axis][bp[axis]] += 1;
         }
     }
-    for p in pairs.remainder() {
-        let b = bins_of(p.centroid2(), cbounds.lo, scale, NB);
+    let stride = u32::try_from(stride).unwrap_or(1);
+    let (first, others) = bin_bounds.split_at_mut(1);
+    let (first_count, other_counts) = bin_count.split_at_mut(1);
+    let (bin_bounds, bin_count) = (&mut first[0], &mut first_count[0]);
+    for (set, counts) in others.iter().zip(other_counts.iter()) {
         for axis in 0..3 {
-            bin_bounds[0][axis][b[axis]].grow(p.lo, p.hi);
-            bin_count[0][axis][b[axis]] += 1;
-        }
-    }
-    let [mut bin_bounds, odd_bounds] = bin_bounds;
-    let [mut bin_count, odd_count] = bin_count;
-    for axis in 0..3 {
-        for b in 0..NB {
-            let o = odd_bounds[axis][b];
-            bin_bounds[axis][b].grow(o.lo, o.hi);
-            bin_count[axis][b] += odd_count[axis][b];
+            for b in 0..NB {
+                let o = set[axis][b];
+                bin_bounds[axis][b].grow(o.lo, o.hi);
+                bin_count[axis][b] += counts[axis][b];
+            }
         }
     }
     let parent_area = bounds.half_area().max(f32::MIN_POSITIVE);
@@ -363,7 +367,8 @@ fn best_split<const NB: usize>(
                 continue;
             }
             let cost = TRAVERSAL_COST
-                + (acc.half_area() * pack_cost(cnt) + right_area[b] * pack_cost(right_count[b]))
+                + (acc.half_area() * pack_cost(cnt.saturating_mul(stride))
+                    + right_area[b] * pack_cost(right_count[b].saturating_mul(stride)))
                     / parent_area;
             if best.is_none_or(|(_, _, c)| cost < c) {
                 best = Some((axis, b, cost));
@@ -398,31 +403,48 @@ fn bins_of(c2: Vec4, lo: Vec4, scale: Vec4, nb: usize) -> [usize; 3] {
 /// Returns their count and the bounds (and centroid bounds) of both sides,
 /// gathered in the same pass. An empty side (every element on one side,
 /// which the SAH sweep never picks) is split by count instead.
+///
+/// Two cursors from the ends (Hoare): only the misplaced pairs are
+/// swapped, so after the splits above (which leave a node's primitives
+/// roughly in space order) most elements are read once and never written;
+/// the one-cursor form wrote every element of the left side.
 fn partition(
     prims: &mut [PrimRef],
     pred: impl Fn(&PrimRef) -> bool,
 ) -> (usize, (Box4, Box4), (Box4, Box4)) {
-    let (mut lb, mut lc, mut rb, mut rc) = (Box4::EMPTY, Box4::EMPTY, Box4::EMPTY, Box4::EMPTY);
-    let mut i = 0;
-    for j in 0..prims.len() {
-        let p = prims[j];
+    let mut left = (Box4::EMPTY, Box4::EMPTY);
+    let mut right = (Box4::EMPTY, Box4::EMPTY);
+    let add = |side: &mut (Box4, Box4), p: &PrimRef| {
+        side.0.grow(p.lo, p.hi);
         let c = p.centroid2();
-        if pred(&p) {
-            lb.grow(p.lo, p.hi);
-            lc.grow(c, c);
-            prims.swap(i, j);
+        side.1.grow(c, c);
+    };
+    let (mut i, mut j) = (0, prims.len());
+    loop {
+        while i < j && pred(&prims[i]) {
+            add(&mut left, &prims[i]);
             i += 1;
-        } else {
-            rb.grow(p.lo, p.hi);
-            rc.grow(c, c);
         }
+        while i < j && !pred(&prims[j - 1]) {
+            add(&mut right, &prims[j - 1]);
+            j -= 1;
+        }
+        if i >= j {
+            break;
+        }
+        // prims[i] belongs right and prims[j − 1] left.
+        prims.swap(i, j - 1);
+        add(&mut left, &prims[i]);
+        add(&mut right, &prims[j - 1]);
+        i += 1;
+        j -= 1;
     }
     if i == 0 || i == prims.len() {
         let mid = prims.len() / 2;
         let (l, r) = prims.split_at(mid);
         return (mid, bounds_of(l), bounds_of(r));
     }
-    (i, (lb, lc), (rb, rc))
+    (i, left, right)
 }
 
 impl Bvh {
