@@ -50,6 +50,8 @@ const PARALLEL_THRESHOLD: usize = 4096;
 const WIDTH: usize = 8;
 /// Rays in a packet ([`Bvh::intersect_packet`]): one bit each in a `u32` mask.
 pub(crate) const PACKET: usize = 8;
+/// A packet's rays that enter an inner node finish its subtree one by one
+/// when they are this many or fewer (measured: 3 ahead of 1 and of 5).
 const SOLO: u32 = 3;
 
 /// A node of `WIDTH` children, their boxes as structure of arrays (one
@@ -833,22 +835,26 @@ impl Bvh {
         }
     }
 
-    /// The closest hits of up to [`PACKET`] rays, each exactly
-    /// [`Bvh::intersect`] of its ray (see [`Bvh::closest_packet`]).
+    /// The closest hits of `rays` into `out` (the same length), each
+    /// exactly [`Bvh::intersect`] of its ray, traced [`PACKET`] at a time
+    /// (see [`Bvh::closest_packet`]).
     pub(crate) fn intersect_packet(&self, rays: &[Ray64], out: &mut [Option<BvhHit>]) {
-        self.arch.dispatch(ClosestPacket {
-            bvh: self,
-            rays,
-            out,
-        });
+        debug_assert_eq!(rays.len(), out.len(), "one hit slot per ray");
+        for (rays, out) in rays.chunks(PACKET).zip(out.chunks_mut(PACKET)) {
+            self.arch.dispatch(ClosestPacket {
+                bvh: self,
+                rays,
+                out,
+            });
+        }
     }
 
     /// The closest hits of a packet of up to [`PACKET`] rays (a 4×2 block
     /// of camera rays): the rays walk the tree together while more than
-    /// one of them enters the same node, one node fetch and one stack for
-    /// all, their slab tests independent of each other (the processor
-    /// overlaps them); a ray left alone below a node finishes that subtree
-    /// on the single-ray walk.
+    /// [`SOLO`] of them enter the same inner node, one node fetch and one
+    /// stack for all, their slab tests independent of each other (the
+    /// processor overlaps them); below a node that `SOLO` or fewer enter,
+    /// each of them finishes the subtree on the single-ray walk.
     ///
     /// Each ray's hit is exactly its single-ray one: a ray leaves a child
     /// only on its own slab test against its own bound, which never culls
@@ -1483,6 +1489,47 @@ mod tests {
                     .filter(|&id| intersect(&pre, &tris[id as usize], t_min, t_max).is_some())
                     .collect();
                 prop_assert_eq!(all, every);
+            }
+        }
+
+        /// Packets in a tree deeper than the walks' 64-entry stacks (a
+        /// geometric run of triangles, each split off its neighbours by
+        /// the SAH one at a time), where both the packet walk and the
+        /// single-ray finishes use their heap stacks.
+        #[test]
+        fn packets_in_a_deep_tree_equal_single_rays(
+            dx in -0.2f64..0.2, dy in -0.2f64..0.2,
+            size in 2usize..=8,
+        ) {
+            let tris: Vec<[Vec3; 3]> = (0..400)
+                .map(|k: i32| {
+                    let x = 1.06f32.powi(k);
+                    let w = x * 0.02;
+                    [
+                        Vec3::new(x, -w, 1.0),
+                        Vec3::new(x + w, w, 1.0),
+                        Vec3::new(x - w, w, 1.02),
+                    ]
+                })
+                .collect();
+            let bvh = build(&tris, false);
+            prop_assert!(bvh.depth >= 10, "depth {}", bvh.depth);
+            let rays: Vec<Ray64> = (0..24u32)
+                .map(|k| {
+                    let x = 1.06f64.powi(i32::try_from(k * 16).unwrap());
+                    Ray64 {
+                        origin: DVec3::new(x + dx * x * 0.02, dy * x * 0.02, -1.0),
+                        dir: DVec3::new(f64::from(k % 3) * 1e-4, 0.0, 1.0).normalize(),
+                        t_min: 0.0,
+                        t_max: f64::INFINITY,
+                    }
+                })
+                .collect();
+            for chunk in rays.chunks(size) {
+                let mut got = vec![None; chunk.len()];
+                bvh.intersect_packet(chunk, &mut got);
+                let want: Vec<Option<BvhHit>> = chunk.iter().map(|r| bvh.intersect(r)).collect();
+                prop_assert_eq!(got, want);
             }
         }
 
