@@ -210,6 +210,56 @@ fn shadow_rays_940k_1080p(bencher: Bencher, threads: usize) {
 /// The rasterizer's visibility pass (setup, coverage, depth test) as the
 /// render plan runs it: the bunny is closed and seen from outside, so its
 /// back faces are culled.
+/// The shadow rays of [`shadow_rays_940k_1080p`], one thread, one by one
+/// (`Visibility::transmittance`) against eight at a time in scanline order
+/// (`ShadowRays::transmittance_packets`, the same answers bit for bit).
+#[divan::bench(consts = [false, true], sample_count = 5)]
+fn shadow_packets_940k_1080p<const PACKETS: bool>(bencher: Bencher) {
+    let t = &bunny().1;
+    let accel = Accel::new(t, AccelOptions::default());
+    let cam = &t.camera;
+    let light = match t.lights[0].kind {
+        rendiff::shade::LightKind::Point { position } => position,
+        rendiff::shade::LightKind::Parallel { .. } => unreachable!(),
+    };
+    let queries: Vec<rendiff::shade::ShadowQuery> = (0..cam.sample_height())
+        .flat_map(|y| (0..cam.sample_width()).map(move |x| (x, y)))
+        .filter_map(|(x, y)| {
+            let r = cam.sample_ray64(x, y);
+            accel.intersect(&r).map(|h| {
+                let sp = t.surface_at(h.prim, rendiff::math::Bary(h.b));
+                let dir = (light - sp.p).normalize();
+                let o = rendiff::shade::offset_origin(sp.p, sp.p_error, sp.ng, dir);
+                let d = light - o;
+                rendiff::shade::ShadowQuery {
+                    light: 0,
+                    origin: o,
+                    dir: d.normalize(),
+                    t_max: d.length(),
+                    normal: d.normalize(),
+                }
+            })
+        })
+        .collect();
+    let vis = ShadowRays::new(&accel);
+    let p = pool(1);
+    let mut out = vec![rendiff::color::Rgb::WHITE; queries.len()];
+    bencher
+        .counter(ItemsCount::new(queries.len()))
+        .bench_local(|| {
+            p.install(|| {
+                if PACKETS {
+                    vis.transmittance_packets(&queries, &mut out);
+                } else {
+                    for (o, q) in out.iter_mut().zip(&queries) {
+                        *o = vis.transmittance(q);
+                    }
+                }
+                black_box(out.iter().filter(|o| o.is_black()).count())
+            })
+        });
+}
+
 #[divan::bench(args = THREADS, sample_count = 10)]
 fn raster_visibility_940k_1080p(bencher: Bencher, threads: usize) {
     let (job, t) = bunny();

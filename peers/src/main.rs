@@ -48,7 +48,6 @@ use rendiff::accel::{Accel, AccelOptions, ShadowRays};
 use rendiff::color::to_srgb8;
 use rendiff::math::{Ray64, to_f32};
 use rendiff::pov::golden::{self, Variant};
-use rendiff::shade::Visibility;
 use rendiff::{Backend, Overrides, Prepared};
 
 use summary::bundled as bundled_scenes;
@@ -271,13 +270,18 @@ fn embree_cmp(scene: &Path, subdivide: u32, repeats: usize) -> Result<RayFigures
                 .sum();
             std::hint::black_box(hits);
         });
-        // Shadow rays: from every visible point to the light, as shading casts them.
+        // Shadow rays: from every visible point to the light, as shading
+        // casts them (eight neighbours at a time, `transmittance_packets`).
         let shadow = shadow_rays(&tri, &accel);
         let vis = ShadowRays::new(&accel);
         let t_shadow = time_ms(&p, repeats, &|| {
             let n: usize = shadow
                 .par_chunks(4096)
-                .map(|c| c.iter().filter(|q| vis.transmittance(q).is_black()).count())
+                .map(|c| {
+                    let mut out = vec![rendiff::color::Rgb::WHITE; c.len()];
+                    vis.transmittance_packets(c, &mut out);
+                    out.iter().filter(|t| t.is_black()).count()
+                })
                 .sum();
             std::hint::black_box(n);
         });

@@ -976,6 +976,164 @@ impl Bvh {
             *o = l.best;
         }
     }
+
+    /// For each ray of `rays`, whether `accept(ray index, triangle, hit)`
+    /// holds for some triangle it hits in `[t_min, t_max]` (into `out`, the
+    /// same length): the answer of [`Bvh::for_each_hit`] stopped at the
+    /// first accepted hit, traced [`PACKET`] rays at a time (see
+    /// [`Bvh::any_packet8`]). `accept` must depend on its arguments only.
+    pub(crate) fn any_packet(
+        &self,
+        rays: &[Ray64],
+        mut accept: impl FnMut(usize, u32, TriHit) -> bool,
+        out: &mut [bool],
+    ) {
+        debug_assert_eq!(rays.len(), out.len(), "one answer per ray");
+        for (c, (rays, out)) in rays.chunks(PACKET).zip(out.chunks_mut(PACKET)).enumerate() {
+            let base = c * PACKET;
+            self.arch.dispatch(AnyPacket {
+                bvh: self,
+                rays,
+                out,
+                accept: |r: usize, id: u32, h: TriHit| accept(base + r, id, h),
+            });
+        }
+    }
+
+    /// [`Bvh::any_packet`] of up to [`PACKET`] rays: the packet walk of
+    /// [`Bvh::closest_packet`] in any order, a ray leaving the packet at its
+    /// first accepted hit. The answers are the single-ray ones: a ray is
+    /// culled from a child only by its own slab test, so it meets every
+    /// triangle it would meet alone until it stops, and whether some hit
+    /// is accepted does not depend on the order the hits come in.
+    #[inline(always)]
+    fn any_packet8(
+        &self,
+        rays: &[Ray64],
+        out: &mut [bool],
+        mut accept: impl FnMut(usize, u32, TriHit) -> bool,
+    ) {
+        let n = rays.len().min(out.len()).min(PACKET);
+        if n <= 1 || self.root == EMPTY || self.root & LEAF != 0 {
+            for (r, (o, ray)) in out.iter_mut().zip(rays).enumerate() {
+                let mut hit = false;
+                self.each_hit(ray, |id, h| {
+                    hit = accept(r, id, h);
+                    hit
+                });
+                *o = hit;
+            }
+            return;
+        }
+        let ray_of = |i: usize| &rays[i.min(n - 1)];
+        let walks: [WalkRay; PACKET] = std::array::from_fn(|i| {
+            let r = ray_of(i);
+            WalkRay::new(r, self.reach(r))
+        });
+        let slabs: [Slab; PACKET] = std::array::from_fn(|i| Slab::new(&walks[i]));
+        let mut t_prune: [f32; PACKET] = std::array::from_fn(|i| walks[i].ray.t_max);
+        let mut pres: [Option<RayPrecomp>; PACKET] = [None; PACKET];
+        // Entries: (child, the mask of its rays).
+        let need = self.stack_need();
+        let mut small = [(0u32, 0u32); 64];
+        let mut big = Vec::new();
+        let stack: &mut [(u32, u32)] = if need <= small.len() {
+            &mut small
+        } else {
+            big.resize(need, (0, 0));
+            &mut big
+        };
+        let mut sp = 0usize;
+        let mut node = self.root;
+        // The rays not yet stopped, and those in the current node.
+        let mut alive: u32 = (1 << n) - 1;
+        let mut active = alive;
+        'walk: loop {
+            if node & LEAF == 0 && active.count_ones() <= SOLO {
+                let mut m = active;
+                while m != 0 {
+                    let r = m.trailing_zeros() as usize;
+                    m &= m - 1;
+                    let mut stopped = false;
+                    let mut leaf = EachLeaf {
+                        bvh: self,
+                        ray: ray_of(r),
+                        walk: &walks[r],
+                        pre: pres[r].take(),
+                        t_max: ray_of(r).t_max,
+                        visit: |id, h| {
+                            stopped = accept(r, id, h);
+                            stopped
+                        },
+                    };
+                    self.traverse_from(node, &slabs[r], &mut t_prune[r], false, &mut leaf);
+                    pres[r] = leaf.pre;
+                    if stopped {
+                        alive &= !(1 << r);
+                    }
+                }
+            } else if node & LEAF != 0 {
+                let mut m = active;
+                while m != 0 {
+                    let r = m.trailing_zeros() as usize;
+                    m &= m - 1;
+                    let ray = ray_of(r);
+                    let pre = pres[r].get_or_insert_with(|| RayPrecomp::of(ray, &walks[r]));
+                    let mut t_max = ray.t_max;
+                    let first = (node & !LEAF) as usize;
+                    if self.leaf_hits(pre, first, ray.t_min, &mut t_max, |id, h, _| {
+                        accept(r, id, h)
+                    }) {
+                        alive &= !(1 << r);
+                    }
+                }
+            } else {
+                let nd = &self.nodes[node as usize];
+                let mut rays_of = [0u32; WIDTH];
+                let mut m = active;
+                while m != 0 {
+                    let r = m.trailing_zeros() as usize;
+                    m &= m - 1;
+                    let (mask, _) = slabs[r].test(nd, t_prune[r]);
+                    for (k, rays) in rays_of.iter_mut().enumerate() {
+                        *rays |= ((mask >> k) & 1) << r;
+                    }
+                }
+                let mut mask = rays_of
+                    .iter()
+                    .enumerate()
+                    .fold(0u32, |acc, (k, &r)| acc | (u32::from(r != 0) << k));
+                if mask != 0 {
+                    let near = mask.trailing_zeros() as usize;
+                    mask &= mask - 1;
+                    while mask != 0 {
+                        let k = mask.trailing_zeros() as usize;
+                        mask &= mask - 1;
+                        stack[sp] = (nd.child[k], rays_of[k]);
+                        sp += 1;
+                    }
+                    node = nd.child[near];
+                    active = rays_of[near];
+                    continue;
+                }
+            }
+            loop {
+                if sp == 0 || alive == 0 {
+                    break 'walk;
+                }
+                sp -= 1;
+                let (child, rays_in) = stack[sp];
+                if rays_in & alive != 0 {
+                    node = child;
+                    active = rays_in & alive;
+                    break;
+                }
+            }
+        }
+        for (r, o) in out[..n].iter_mut().enumerate() {
+            *o = alive & (1 << r) == 0;
+        }
+    }
 }
 
 /// A leaf test of a walk ([`Bvh::traverse`]). A trait with an
@@ -1092,6 +1250,23 @@ impl WithSimd for ClosestPacket<'_> {
     #[inline(always)]
     fn with_simd<S: pulp::Simd>(self, _: S) {
         self.bvh.closest_packet(self.rays, self.out);
+    }
+}
+
+/// A packet any-hit query as a `pulp` operation (see [`Closest`]).
+struct AnyPacket<'a, F> {
+    bvh: &'a Bvh,
+    rays: &'a [Ray64],
+    out: &'a mut [bool],
+    accept: F,
+}
+
+impl<F: FnMut(usize, u32, TriHit) -> bool> WithSimd for AnyPacket<'_, F> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _: S) {
+        self.bvh.any_packet8(self.rays, self.out, self.accept);
     }
 }
 
@@ -1489,6 +1664,62 @@ mod tests {
                     .filter(|&id| intersect(&pre, &tris[id as usize], t_min, t_max).is_some())
                     .collect();
                 prop_assert_eq!(all, every);
+            }
+        }
+
+        /// A packet's any-hit answers are the single-ray ones (the every-hit
+        /// walk stopped at the first accepted hit), with an acceptance that
+        /// rejects some triangles (so a ray may pass hits before the one
+        /// that stops it), on both instruction sets, for every packet size.
+        #[test]
+        fn packet_any_hits_equal_single_ray_answers(
+            seed in 0u64..1000,
+            n in 1usize..600,
+            ox in -0.5f64..1.5, oy in -0.5f64..1.5, oz in -0.5f64..1.5,
+            dx in -1.0f64..1.0, dy in -1.0f64..1.0, dz in -1.0f64..1.0,
+            spread in 0.001f64..0.3,
+            size in 1usize..=8,
+            reject in 1u32..5,
+        ) {
+            let d = DVec3::new(dx, dy, dz);
+            prop_assume!(d.length() > 1e-3);
+            let tris = soup(n, seed, 0.2);
+            let mut bvh = build(&tris, false);
+            let rays: Vec<Ray64> = (0..40u32)
+                .map(|k| {
+                    let jitter = DVec3::new(
+                        f64::from(k % 4),
+                        f64::from(k / 4 % 2),
+                        f64::from(k / 8),
+                    ) * spread;
+                    Ray64 {
+                        origin: DVec3::new(ox, oy, oz),
+                        dir: (d + jitter).normalize(),
+                        t_min: 0.0,
+                        t_max: if k % 3 == 2 { 0.4 } else { f64::INFINITY },
+                    }
+                })
+                .collect();
+            let accept = |r: usize, id: u32| !(id + u32::try_from(r).unwrap()).is_multiple_of(reject + 1);
+            for path in [SimdPath::Auto, SimdPath::Baseline] {
+                bvh.set_simd(path);
+                for (c, chunk) in rays.chunks(size).enumerate() {
+                    let mut got = vec![false; chunk.len()];
+                    bvh.any_packet(chunk, |r, id, _| accept(c * size + r, id), &mut got);
+                    let want: Vec<bool> = chunk
+                        .iter()
+                        .enumerate()
+                        .map(|(r, ray)| {
+                            let mut hit = false;
+                            bvh.for_each_hit(ray, |id, _| {
+                                hit = accept(c * size + r, id);
+                                hit
+                            });
+                            hit
+                        })
+                        .collect();
+                    prop_assert_eq!(got, want);
+                }
             }
         }
 

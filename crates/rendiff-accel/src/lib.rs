@@ -92,6 +92,10 @@ pub struct Accel<'s> {
     class: Vec<ShadowClass>,
     analytic_class: Vec<ShadowClass>,
     any_caster: bool,
+    /// Every shadow caster is an opaque triangle (no transparent one, no
+    /// analytic shape that casts): a shadow ray's answer is then whether
+    /// it meets one, and rays can be answered in packets.
+    opaque_triangles_only: bool,
 }
 
 impl<'s> Accel<'s> {
@@ -133,6 +137,10 @@ impl<'s> Accel<'s> {
             .iter()
             .chain(&analytic_class)
             .any(|c| *c != ShadowClass::None);
+        let opaque_triangles_only = !class.contains(&ShadowClass::Transparent)
+            && analytic
+                .iter()
+                .all(|&k| analytic_class[k] == ShadowClass::None);
         Accel {
             scene,
             bvh,
@@ -140,6 +148,7 @@ impl<'s> Accel<'s> {
             class,
             analytic_class,
             any_caster,
+            opaque_triangles_only,
         }
     }
 
@@ -380,6 +389,107 @@ impl<'a, 's> ShadowRays<'a, 's> {
     #[must_use]
     pub fn cast(&self) -> u64 {
         self.cast.load(std::sync::atomic::Ordering::Relaxed)
+    }
+
+    /// [`Visibility::transmittance`] of each query of `queries` into
+    /// `out` (the same length), bit for bit, traced as packets of eight
+    /// where every caster is an opaque triangle (then a ray's answer is
+    /// whether it meets one, in any order), else one by one. Coherent
+    /// queries (the samples of a row toward one light) share their walk.
+    ///
+    /// # Panics
+    ///
+    /// When `out` and `queries` differ in length.
+    pub fn transmittance_packets(&self, queries: &[ShadowQuery], out: &mut [Rgb]) {
+        assert_eq!(queries.len(), out.len(), "one answer per query");
+        let a = self.accel;
+        if queries.is_empty() {
+            return;
+        }
+        if !a.any_caster {
+            out.fill(Rgb::WHITE);
+            return;
+        }
+        if !a.opaque_triangles_only {
+            for (o, q) in out.iter_mut().zip(queries) {
+                *o = self.transmittance(q);
+            }
+            return;
+        }
+        self.cast
+            .fetch_add(queries.len() as u64, std::sync::atomic::Ordering::Relaxed);
+        let scene = a.scene;
+        let mut rays = [shadow_ray(scene, &queries[0]).0; bvh::PACKET];
+        let mut lights = [None; bvh::PACKET];
+        let mut blocked = [false; bvh::PACKET];
+        for (qs, os) in queries.chunks(bvh::PACKET).zip(out.chunks_mut(bvh::PACKET)) {
+            for (k, q) in qs.iter().enumerate() {
+                (rays[k], lights[k]) = shadow_ray(scene, q);
+            }
+            let m = qs.len();
+            a.bvh.any_packet(
+                &rays[..m],
+                |r, id, _| {
+                    a.class[id as usize] != ShadowClass::None
+                        && !lights[r].is_some_and(|l| plane_through(scene, id, l))
+                },
+                &mut blocked[..m],
+            );
+            for (o, &b) in os.iter_mut().zip(&blocked[..m]) {
+                *o = if b { Rgb::BLACK } else { Rgb::WHITE };
+            }
+        }
+    }
+}
+
+/// Shadow queries answered together: a batch's queries toward each light
+/// traced as packets ([`ShadowRays::transmittance_packets`]), the answers
+/// kept in the batch's order for [`rendiff_core::shade::Answered`]. Holds
+/// its buffers from batch to batch.
+#[derive(Debug, Default)]
+pub struct ShadowBatch {
+    answers: Vec<(ShadowQuery, Rgb)>,
+    order: Vec<usize>,
+    group: Vec<ShadowQuery>,
+    group_answers: Vec<Rgb>,
+}
+
+impl ShadowBatch {
+    /// Answers `queries` through `rays` (light by light, in packets) and
+    /// returns them with their answers, in the order given.
+    pub fn answer(
+        &mut self,
+        rays: &ShadowRays<'_, '_>,
+        queries: &[ShadowQuery],
+    ) -> &[(ShadowQuery, Rgb)] {
+        self.answers.clear();
+        self.answers
+            .extend(queries.iter().map(|q| (*q, Rgb::WHITE)));
+        // The queries grouped by light (stable: a light's rays in the
+        // batch's order, neighbours next to each other).
+        self.order.clear();
+        self.order.extend(0..queries.len());
+        self.order.sort_by_key(|&k| queries[k].light);
+        let mut start = 0;
+        while start < self.order.len() {
+            let light = queries[self.order[start]].light;
+            let end = start
+                + self.order[start..]
+                    .iter()
+                    .take_while(|&&k| queries[k].light == light)
+                    .count();
+            self.group.clear();
+            self.group
+                .extend(self.order[start..end].iter().map(|&k| queries[k]));
+            self.group_answers.clear();
+            self.group_answers.resize(self.group.len(), Rgb::WHITE);
+            rays.transmittance_packets(&self.group, &mut self.group_answers);
+            for (&k, &t) in self.order[start..end].iter().zip(&self.group_answers) {
+                self.answers[k].1 = t;
+            }
+            start = end;
+        }
+        &self.answers
     }
 }
 

@@ -446,6 +446,91 @@ fn metallic_tint(metallic: f32, pigment: Rgb, n_dot_l: f32) -> Rgb {
     Rgb::splat(1.0) + (pigment - Rgb::WHITE) * (metallic * (1.0 - f))
 }
 
+/// The shadow ray of light `i` (toward it along unit `l`, at distance
+/// `dist`) from `sp`: a point light's segment from the offset origin to
+/// the light itself (its end within rounding of the light), a parallel
+/// light's direction without end.
+fn shadow_query(i: usize, light: &Light, sp: &SurfacePoint, l: Vec3, dist: f32) -> ShadowQuery {
+    let origin = offset_origin(sp.p, sp.p_error, sp.ng, l);
+    let (dir, t_max) = match light.kind {
+        LightKind::Point { position } => {
+            let v = position - origin;
+            let len = v.length();
+            if len > 0.0 && len.is_finite() {
+                (v / len, len)
+            } else {
+                (l, dist)
+            }
+        }
+        LightKind::Parallel { .. } => (l, f32::INFINITY),
+    };
+    ShadowQuery {
+        light: i,
+        origin,
+        dir,
+        t_max,
+        normal: sp.ng,
+    }
+}
+
+/// Calls `query` with each shadow query [`shade`] makes at `sp` seen
+/// along `d`, in the order it makes them (light order), so that a caller
+/// can answer a batch of samples' queries together and then shade them
+/// with the answers ([`Answered`]).
+pub fn shadow_queries(
+    ctx: &ShadeContext<'_>,
+    sp: &SurfacePoint,
+    d: Vec3,
+    mut query: impl FnMut(ShadowQuery),
+) {
+    if !ctx.shadows {
+        return;
+    }
+    let m = &ctx.materials[usize::from(sp.material)];
+    let n = shading_normal(m, sp, d);
+    for (i, light) in ctx.lights.iter().enumerate() {
+        let (l, dist) = light.toward(sp.p);
+        if n.dot(l) <= 0.0 || dist == 0.0 || light.shadowless {
+            continue;
+        }
+        query(shadow_query(i, light, sp, l, dist));
+    }
+}
+
+/// A [`Visibility`] that answers from a list of queries answered before
+/// (in the order [`shadow_queries`] gave them, which is the order
+/// [`shade`] asks them in), and asks `fallback` for any other query.
+pub struct Answered<'a> {
+    /// The queries and their transmittance.
+    pub answers: &'a [(ShadowQuery, Rgb)],
+    /// For a query not in `answers`.
+    pub fallback: &'a dyn Visibility,
+    /// The next answer expected.
+    pub next: std::sync::atomic::AtomicUsize,
+}
+
+impl std::fmt::Debug for Answered<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Answered")
+            .field("answers", &self.answers)
+            .field("next", &self.next)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Visibility for Answered<'_> {
+    fn transmittance(&self, q: &ShadowQuery) -> Rgb {
+        let k = self.next.load(std::sync::atomic::Ordering::Relaxed);
+        if let Some((a, tr)) = self.answers.get(k)
+            && a == q
+        {
+            self.next.store(k + 1, std::sync::atomic::Ordering::Relaxed);
+            return *tr;
+        }
+        self.fallback.transmittance(q)
+    }
+}
+
 /// Shades a surface point hit by a ray with unit direction `d`.
 ///
 /// Shadows are asked of `vis` with one ray per light that has `N·L > 0`
@@ -480,29 +565,7 @@ pub fn shade(ctx: &ShadeContext<'_>, sp: &SurfacePoint, d: Vec3, vis: &dyn Visib
         }
         let mut lc = light.color * light.attenuation(dist);
         if !light.shadowless && ctx.shadows {
-            let origin = offset_origin(sp.p, sp.p_error, sp.ng, l);
-            // A point light: the segment from the offset origin to the
-            // light itself (its end is within rounding of the
-            // light); a parallel light: the direction, without end.
-            let (dir, t_max) = match light.kind {
-                LightKind::Point { position } => {
-                    let v = position - origin;
-                    let len = v.length();
-                    if len > 0.0 && len.is_finite() {
-                        (v / len, len)
-                    } else {
-                        (l, dist)
-                    }
-                }
-                LightKind::Parallel { .. } => (l, f32::INFINITY),
-            };
-            let tr = vis.transmittance(&ShadowQuery {
-                light: i,
-                origin,
-                dir,
-                t_max,
-                normal: sp.ng,
-            });
+            let tr = vis.transmittance(&shadow_query(i, light, sp, l, dist));
             if tr != Rgb::WHITE {
                 flags |= shadow_flag(i);
             }

@@ -34,7 +34,7 @@ mod shadow_map;
 use rayon::prelude::*;
 
 use clip::{HVert, clip_polygon, planes};
-use rendiff_accel::{Accel, AccelOptions, ShadowRays};
+use rendiff_accel::{Accel, AccelOptions, ShadowBatch, ShadowRays};
 use rendiff_core::camera::{Projection, SampleRays};
 use rendiff_core::coverage::{FillRule, SampleGrid, SnappedTri, Sub8, bbox_samples, doubled_area};
 use rendiff_core::frame::{BACKGROUND, Frame, Sample};
@@ -977,6 +977,11 @@ fn shade_pass(
                 (None, None) => &Unoccluded,
             };
             let sy = band.y0;
+            // With shadow rays, the visible samples are shaded in batches
+            // of eight: their shadow queries first, answered together
+            // (packets per light: neighbours' rays toward one light share
+            // their walk), then each sample with its answers.
+            let mut batch = ShadeBatch::default();
             for sx in 0..sw {
                 let i = (sy as usize) * w + sx as usize;
                 let tri = vis.id[i];
@@ -989,9 +994,19 @@ fn shade_pass(
                 let (b, p64) = scene.view_weights(tri, ray64.origin, ray64.dir);
                 let sp = scene.surface_at(tri, b);
                 let ray = ray64.to_f32();
-                let shaded = shade::shade(&ctx, &sp, ray.dir, visibility);
-                let s = Sample::hit(shaded.local, cam.frame_depth(p64), tri, shaded.flags);
-                band.set(sx, 0, s);
+                let depth = cam.frame_depth(p64);
+                let Some(r) = &rays else {
+                    let shaded = shade::shade(&ctx, &sp, ray.dir, visibility);
+                    band.set(sx, 0, Sample::hit(shaded.local, depth, tri, shaded.flags));
+                    continue;
+                };
+                batch.push(&ctx, sx, tri, sp, ray.dir, depth);
+                if batch.is_full() {
+                    batch.shade(&ctx, r, |sx, s| band.set(sx, 0, s));
+                }
+            }
+            if let Some(r) = &rays {
+                batch.shade(&ctx, r, |sx, s| band.set(sx, 0, s));
             }
             rays.as_ref().map_or(0, ShadowRays::cast)
         })
@@ -1000,6 +1015,66 @@ fn shade_pass(
     frame.resolve();
     let maps = map.as_ref().map_or(0, shadow_map::ShadowMaps::count);
     (frame, shadow_rays, maps)
+}
+
+/// Visible samples of a row waiting to be shaded together (see
+/// [`shade_pass`]), with their shadow queries.
+#[derive(Default)]
+struct ShadeBatch {
+    /// (column, triangle, surface point, view direction, frame depth).
+    samples: Vec<(u32, u32, shade::SurfacePoint, rendiff_core::math::Vec3, f64)>,
+    /// Where each sample's queries start in `queries`.
+    starts: Vec<usize>,
+    queries: Vec<shade::ShadowQuery>,
+    answers: ShadowBatch,
+}
+
+impl ShadeBatch {
+    /// Samples per batch: one packet per light.
+    const SIZE: usize = 8;
+
+    fn push(
+        &mut self,
+        ctx: &shade::ShadeContext<'_>,
+        sx: u32,
+        tri: u32,
+        sp: shade::SurfacePoint,
+        dir: rendiff_core::math::Vec3,
+        depth: f64,
+    ) {
+        self.starts.push(self.queries.len());
+        shade::shadow_queries(ctx, &sp, dir, |q| self.queries.push(q));
+        self.samples.push((sx, tri, sp, dir, depth));
+    }
+
+    fn is_full(&self) -> bool {
+        self.samples.len() >= Self::SIZE
+    }
+
+    /// Answers the queries together, shades every sample with its answers
+    /// (exactly as `shade` with the shadow rays would) and hands each to
+    /// `set`; empties the batch.
+    fn shade(
+        &mut self,
+        ctx: &shade::ShadeContext<'_>,
+        rays: &ShadowRays<'_, '_>,
+        mut set: impl FnMut(u32, Sample),
+    ) {
+        let answers = self.answers.answer(rays, &self.queries);
+        self.starts.push(self.queries.len());
+        for (k, (sx, tri, sp, dir, depth)) in self.samples.iter().enumerate() {
+            let answered = shade::Answered {
+                answers: &answers[self.starts[k]..self.starts[k + 1]],
+                fallback: rays,
+                next: std::sync::atomic::AtomicUsize::new(0),
+            };
+            let shaded = shade::shade(ctx, sp, *dir, &answered);
+            set(*sx, Sample::hit(shaded.local, *depth, *tri, shaded.flags));
+        }
+        self.samples.clear();
+        self.starts.clear();
+        self.queries.clear();
+    }
 }
 
 #[cfg(test)]

@@ -20,7 +20,7 @@
 
 #![warn(missing_docs, missing_debug_implementations)]
 
-use rendiff_accel::{Accel, Hit, ShadowRays};
+use rendiff_accel::{Accel, Hit, ShadowBatch, ShadowRays};
 use rendiff_core::camera::SampleRays;
 use rendiff_core::color::Rgb;
 use rendiff_core::frame::{Frame, Sample};
@@ -47,6 +47,9 @@ const BLOCK_W: u32 = 4;
 const BLOCK_H: u32 = 2;
 /// Rays in a packet.
 const BLOCK: usize = (BLOCK_W * BLOCK_H) as usize;
+
+/// A primary hit ready to shade ([`Tracer::prepare`]).
+type Prepared = (SurfacePoint, DVec3, Vec3, u32);
 
 /// Straight continuations through `ior = 1` surfaces do not use up depth
 /// (POV-Ray); this bounds them per path so no scene can recurse without end.
@@ -278,6 +281,10 @@ fn render_with(
             let mut rays = [unset; BLOCK];
             let mut at = [(0u32, 0u32); BLOCK];
             let mut hits = [None; BLOCK];
+            let mut prepared: [Option<Prepared>; BLOCK] = [None; BLOCK];
+            let mut starts = [0usize; BLOCK + 1];
+            let mut queries: Vec<shade::ShadowQuery> = Vec::new();
+            let mut batch = ShadowBatch::default();
             for tx in (0..sw).step_by(TILE as usize) {
                 let tx1 = (tx + TILE).min(sw);
                 for dy in (0..band.rows).step_by(BLOCK_H as usize) {
@@ -297,9 +304,37 @@ fn render_with(
                                 *h = tracer.intersect(r, &mut w);
                             }
                         }
+                        // The block's primary shadow queries answered
+                        // together (packets per light), then each sample
+                        // shaded with its answers and its ray tree traced.
+                        queries.clear();
+                        for k in 0..n {
+                            starts[k] = queries.len();
+                            prepared[k] = hits[k].map(|hit| {
+                                let p = tracer.prepare(&rays[k], hit);
+                                shade::shadow_queries(&tracer.ctx, &p.0, p.2, |q| {
+                                    queries.push(q);
+                                });
+                                p
+                            });
+                        }
+                        starts[n] = queries.len();
+                        let answers = batch.answer(&w.vis, &queries);
                         for k in 0..n {
                             let (sx, y) = at[k];
-                            band.set(sx, y, tracer.sample(&rays[k], hits[k], &mut w));
+                            let s = match &prepared[k] {
+                                None => Sample::background(scene.background),
+                                Some(p) => {
+                                    let answered = shade::Answered {
+                                        answers: &answers[starts[k]..starts[k + 1]],
+                                        fallback: &w.vis,
+                                        next: std::sync::atomic::AtomicUsize::new(0),
+                                    };
+                                    let shaded = shade::shade(&tracer.ctx, &p.0, p.2, &answered);
+                                    tracer.finish(p, &shaded, &mut w)
+                                }
+                            };
+                            band.set(sx, y, s);
                         }
                         primary += n as u64;
                     }
@@ -323,23 +358,29 @@ fn render_with(
 }
 
 impl Tracer<'_, '_> {
-    /// The sample of the primary ray `ray64`, whose hit
-    /// ([`Tracer::intersect`]) is `hit`.
-    fn sample(&self, ray64: &Ray64, hit: Option<Hit>, w: &mut Worker<'_, '_>) -> Sample {
-        let cam = &self.scene.camera;
-        let (o64, d64) = (ray64.origin, ray64.dir);
-        let Some(hit) = hit else {
-            return Sample::background(self.scene.background);
-        };
+    /// What shading a primary hit needs: the surface point, the `f64` hit
+    /// point, the view direction (the `f32` rounding of the ray's) and the
+    /// primitive.
+    fn prepare(&self, ray64: &Ray64, hit: Hit) -> Prepared {
         // `Camera::primary_ray` is this ray rounded to f32 (one rounding
         // of each part): derived here rather than computed again.
         let ray = ray64.to_f32();
-        let (sp, p64) = self.surface(&hit, o64, d64);
-        let shaded = shade::shade(&self.ctx, &sp, ray.dir, &w.vis);
+        let (sp, p64) = self.surface(&hit, ray64.origin, ray64.dir);
+        (sp, p64, ray.dir, hit.prim)
+    }
+
+    /// The sample of a primary hit shaded as `shaded`: its local colour
+    /// and its ray tree.
+    fn finish(&self, p: &Prepared, shaded: &Shaded, w: &mut Worker<'_, '_>) -> Sample {
+        let (sp, p64, dir, prim) = p;
         let mut inside = self.eye_inside.clone();
-        let color =
-            shaded.local + self.children(w, &sp, &shaded, ray.dir, Depth::PRIMARY, &mut inside);
-        Sample::hit(color, cam.frame_depth(p64), hit.prim, shaded.flags)
+        let color = shaded.local + self.children(w, sp, shaded, *dir, Depth::PRIMARY, &mut inside);
+        Sample::hit(
+            color,
+            self.scene.camera.frame_depth(*p64),
+            *prim,
+            shaded.flags,
+        )
     }
 
     /// The nearest hit of a ray of the ray tree on the faces it may hit,
