@@ -476,18 +476,19 @@ fn shadow_query(i: usize, light: &Light, sp: &SurfacePoint, l: Vec3, dist: f32) 
 /// Calls `query` with each shadow query [`shade`] makes at `sp` seen
 /// along `d`, in the order it makes them (light order), so that a caller
 /// can answer a batch of samples' queries together and then shade them
-/// with the answers ([`Answered`]).
+/// with the answers ([`Answered`], [`shade_with_normal`]). Returns the
+/// shading normal.
 pub fn shadow_queries(
     ctx: &ShadeContext<'_>,
     sp: &SurfacePoint,
     d: Vec3,
     mut query: impl FnMut(ShadowQuery),
-) {
-    if !ctx.shadows {
-        return;
-    }
+) -> Vec3 {
     let m = &ctx.materials[usize::from(sp.material)];
     let n = shading_normal(m, sp, d);
+    if !ctx.shadows {
+        return n;
+    }
     for (i, light) in ctx.lights.iter().enumerate() {
         let (l, dist) = light.toward(sp.p);
         if n.dot(l) <= 0.0 || dist == 0.0 || light.shadowless {
@@ -495,6 +496,7 @@ pub fn shadow_queries(
         }
         query(shadow_query(i, light, sp, l, dist));
     }
+    n
 }
 
 /// A [`Visibility`] that answers from a list of queries answered before
@@ -539,7 +541,21 @@ impl Visibility for Answered<'_> {
 #[must_use]
 pub fn shade(ctx: &ShadeContext<'_>, sp: &SurfacePoint, d: Vec3, vis: &dyn Visibility) -> Shaded {
     let m = &ctx.materials[usize::from(sp.material)];
-    let n = shading_normal(m, sp, d);
+    shade_with_normal(ctx, sp, d, shading_normal(m, sp, d), vis)
+}
+
+/// [`shade`] given the shading normal [`shadow_queries`] returned for the
+/// same `sp` and `d` (the same result, bit for bit, without forming the
+/// normal again).
+#[must_use]
+pub fn shade_with_normal(
+    ctx: &ShadeContext<'_>,
+    sp: &SurfacePoint,
+    d: Vec3,
+    n: Vec3,
+    vis: &dyn Visibility,
+) -> Shaded {
+    let m = &ctx.materials[usize::from(sp.material)];
     let (pig, f, t) = m.pigment_at(sp.uv);
     let opacity = 1.0 - f - t;
     let mut flags = 0u32;

@@ -1021,8 +1021,16 @@ fn shade_pass(
 /// [`shade_pass`]), with their shadow queries.
 #[derive(Default)]
 struct ShadeBatch {
-    /// (column, triangle, surface point, view direction, frame depth).
-    samples: Vec<(u32, u32, shade::SurfacePoint, rendiff_core::math::Vec3, f64)>,
+    /// (column, triangle, surface point, view direction, shading normal,
+    /// frame depth).
+    samples: Vec<(
+        u32,
+        u32,
+        shade::SurfacePoint,
+        rendiff_core::math::Vec3,
+        rendiff_core::math::Vec3,
+        f64,
+    )>,
     /// Where each sample's queries start in `queries`.
     starts: Vec<usize>,
     queries: Vec<shade::ShadowQuery>,
@@ -1043,8 +1051,8 @@ impl ShadeBatch {
         depth: f64,
     ) {
         self.starts.push(self.queries.len());
-        shade::shadow_queries(ctx, &sp, dir, |q| self.queries.push(q));
-        self.samples.push((sx, tri, sp, dir, depth));
+        let n = shade::shadow_queries(ctx, &sp, dir, |q| self.queries.push(q));
+        self.samples.push((sx, tri, sp, dir, n, depth));
     }
 
     fn is_full(&self) -> bool {
@@ -1062,13 +1070,13 @@ impl ShadeBatch {
     ) {
         let answers = self.answers.answer(rays, &self.queries);
         self.starts.push(self.queries.len());
-        for (k, (sx, tri, sp, dir, depth)) in self.samples.iter().enumerate() {
+        for (k, (sx, tri, sp, dir, n, depth)) in self.samples.iter().enumerate() {
             let answered = shade::Answered {
                 answers: &answers[self.starts[k]..self.starts[k + 1]],
                 fallback: rays,
                 next: std::sync::atomic::AtomicUsize::new(0),
             };
-            let shaded = shade::shade(ctx, sp, *dir, &answered);
+            let shaded = shade::shade_with_normal(ctx, sp, *dir, *n, &answered);
             set(*sx, Sample::hit(shaded.local, *depth, *tri, shaded.flags));
         }
         self.samples.clear();

@@ -281,7 +281,7 @@ fn render_with(
             let mut rays = [unset; BLOCK];
             let mut at = [(0u32, 0u32); BLOCK];
             let mut hits = [None; BLOCK];
-            let mut prepared: [Option<Prepared>; BLOCK] = [None; BLOCK];
+            let mut prepared: [Option<(Prepared, Vec3)>; BLOCK] = [None; BLOCK];
             let mut starts = [0usize; BLOCK + 1];
             let mut queries: Vec<shade::ShadowQuery> = Vec::new();
             let mut batch = ShadowBatch::default();
@@ -312,10 +312,10 @@ fn render_with(
                             starts[k] = queries.len();
                             prepared[k] = hits[k].map(|hit| {
                                 let p = tracer.prepare(&rays[k], hit);
-                                shade::shadow_queries(&tracer.ctx, &p.0, p.2, |q| {
+                                let n = shade::shadow_queries(&tracer.ctx, &p.0, p.2, |q| {
                                     queries.push(q);
                                 });
-                                p
+                                (p, n)
                             });
                         }
                         starts[n] = queries.len();
@@ -324,13 +324,19 @@ fn render_with(
                             let (sx, y) = at[k];
                             let s = match &prepared[k] {
                                 None => Sample::background(scene.background),
-                                Some(p) => {
+                                Some((p, n)) => {
                                     let answered = shade::Answered {
                                         answers: &answers[starts[k]..starts[k + 1]],
                                         fallback: &w.vis,
                                         next: std::sync::atomic::AtomicUsize::new(0),
                                     };
-                                    let shaded = shade::shade(&tracer.ctx, &p.0, p.2, &answered);
+                                    let shaded = shade::shade_with_normal(
+                                        &tracer.ctx,
+                                        &p.0,
+                                        p.2,
+                                        *n,
+                                        &answered,
+                                    );
                                     tracer.finish(p, &shaded, &mut w)
                                 }
                             };
