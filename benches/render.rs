@@ -159,52 +159,53 @@ fn camera_rays_1080p<const TABLES: bool>(bencher: Bencher) {
         });
 }
 
-/// One shadow ray toward the light from every visible point.
+/// One shadow ray toward the light from every visible point, one by one
+/// (`Visibility::transmittance`; `shadow_packets_940k_1080p` sets packets
+/// beside it).
 #[divan::bench(args = THREADS, sample_count = 5)]
 fn shadow_rays_940k_1080p(bencher: Bencher, threads: usize) {
     use rayon::prelude::*;
     let t = &bunny().1;
     let accel = Accel::new(t, AccelOptions::default());
+    let queries = bunny_shadow_queries(&accel);
+    let vis = ShadowRays::new(&accel);
+    let p = pool(threads);
+    bencher.counter(ItemsCount::new(queries.len())).bench(|| {
+        p.install(|| {
+            queries
+                .par_chunks(4096)
+                .map(|c| c.iter().filter(|q| vis.transmittance(q).is_black()).count())
+                .sum::<usize>()
+        })
+    });
+}
+
+/// One shadow ray to the bunny's light from each visible sample's point,
+/// in scanline order, as shading casts them.
+fn bunny_shadow_queries(accel: &Accel<'_>) -> Vec<rendiff::shade::ShadowQuery> {
+    let t = accel.scene();
     let cam = &t.camera;
     let light = match t.lights[0].kind {
         rendiff::shade::LightKind::Point { position } => position,
         rendiff::shade::LightKind::Parallel { .. } => unreachable!(),
     };
-    let origins: Vec<rendiff::math::Vec3> = (0..cam.sample_height())
+    (0..cam.sample_height())
         .flat_map(|y| (0..cam.sample_width()).map(move |x| (x, y)))
         .filter_map(|(x, y)| {
-            let r = cam.sample_ray64(x, y);
-            accel.intersect(&r).map(|h| {
-                let sp = t.surface_at(h.prim, rendiff::math::Bary(h.b));
-                let dir = (light - sp.p).normalize();
-                rendiff::shade::offset_origin(sp.p, sp.p_error, sp.ng, dir)
+            let h = accel.intersect(&cam.sample_ray64(x, y))?;
+            let sp = t.surface_at(h.prim, rendiff::math::Bary(h.b));
+            let dir = (light - sp.p).normalize();
+            let o = rendiff::shade::offset_origin(sp.p, sp.p_error, sp.ng, dir);
+            let d = light - o;
+            Some(rendiff::shade::ShadowQuery {
+                light: 0,
+                origin: o,
+                dir: d.normalize(),
+                t_max: d.length(),
+                normal: d.normalize(),
             })
         })
-        .collect();
-    let vis = ShadowRays::new(&accel);
-    let p = pool(threads);
-    bencher.counter(ItemsCount::new(origins.len())).bench(|| {
-        p.install(|| {
-            origins
-                .par_chunks(4096)
-                .map(|c| {
-                    c.iter()
-                        .filter(|o| {
-                            let d = light - **o;
-                            vis.transmittance(&rendiff::shade::ShadowQuery {
-                                light: 0,
-                                origin: **o,
-                                dir: d.normalize(),
-                                t_max: d.length(),
-                                normal: d.normalize(),
-                            })
-                            .is_black()
-                        })
-                        .count()
-                })
-                .sum::<usize>()
-        })
-    });
+        .collect()
 }
 
 /// The rasterizer's visibility pass (setup, coverage, depth test) as the
@@ -217,30 +218,7 @@ fn shadow_rays_940k_1080p(bencher: Bencher, threads: usize) {
 fn shadow_packets_940k_1080p<const PACKETS: bool>(bencher: Bencher) {
     let t = &bunny().1;
     let accel = Accel::new(t, AccelOptions::default());
-    let cam = &t.camera;
-    let light = match t.lights[0].kind {
-        rendiff::shade::LightKind::Point { position } => position,
-        rendiff::shade::LightKind::Parallel { .. } => unreachable!(),
-    };
-    let queries: Vec<rendiff::shade::ShadowQuery> = (0..cam.sample_height())
-        .flat_map(|y| (0..cam.sample_width()).map(move |x| (x, y)))
-        .filter_map(|(x, y)| {
-            let r = cam.sample_ray64(x, y);
-            accel.intersect(&r).map(|h| {
-                let sp = t.surface_at(h.prim, rendiff::math::Bary(h.b));
-                let dir = (light - sp.p).normalize();
-                let o = rendiff::shade::offset_origin(sp.p, sp.p_error, sp.ng, dir);
-                let d = light - o;
-                rendiff::shade::ShadowQuery {
-                    light: 0,
-                    origin: o,
-                    dir: d.normalize(),
-                    t_max: d.length(),
-                    normal: d.normalize(),
-                }
-            })
-        })
-        .collect();
+    let queries = bunny_shadow_queries(&accel);
     let vis = ShadowRays::new(&accel);
     let p = pool(1);
     let mut out = vec![rendiff::color::Rgb::WHITE; queries.len()];

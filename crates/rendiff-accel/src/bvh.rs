@@ -765,12 +765,11 @@ impl Bvh {
         self.traverse_from(self.root, &Slab::new(walk), t_max, ordered, leaf);
     }
 
-    /// The stack a walk below a node needs, and the small array that holds
-    /// it for the usual trees (cheap to set up per ray).
+    /// The stack a walk below a node needs: a visit pops one entry and
+    /// pushes at most WIDTH − 1 (the nearest child is descended into
+    /// directly), so (WIDTH − 1)·depth + 1 entries.
     #[inline(always)]
     fn stack_need(&self) -> usize {
-        // A visit pops one entry and pushes at most WIDTH − 1 (the nearest
-        // child is descended into directly): (WIDTH − 1)·depth + 1.
         (WIDTH - 1) * self.depth as usize + 1
     }
 
@@ -786,15 +785,8 @@ impl Bvh {
     ) {
         let grow = Slab::GROW;
         // The stack holds (t_near bits << 32 | child).
-        let need = self.stack_need();
-        let mut small = [0u64; 64];
-        let mut big = Vec::new();
-        let stack: &mut [u64] = if need <= small.len() {
-            &mut small
-        } else {
-            big.resize(need, 0);
-            &mut big
-        };
+        let mut stack = Stack::<u64>::default();
+        let stack = stack.slice(self.stack_need());
         let mut sp = 0usize;
         let mut node = start;
         loop {
@@ -835,6 +827,24 @@ impl Bvh {
         }
     }
 
+    /// The walking rays, slab constants and `f32` bounds of a packet's
+    /// first `n` rays (the lanes past `n` repeat the last ray and are
+    /// never entered).
+    #[inline(always)]
+    fn packet_rays(
+        &self,
+        rays: &[Ray64],
+        n: usize,
+    ) -> ([WalkRay; PACKET], [Slab; PACKET], [f32; PACKET]) {
+        let walks: [WalkRay; PACKET] = std::array::from_fn(|i| {
+            let r = &rays[i.min(n - 1)];
+            WalkRay::new(r, self.reach(r))
+        });
+        let slabs = std::array::from_fn(|i| Slab::new(&walks[i]));
+        let t_prune = std::array::from_fn(|i| walks[i].ray.t_max);
+        (walks, slabs, t_prune)
+    }
+
     /// The closest hits of `rays` into `out` (the same length), each
     /// exactly [`Bvh::intersect`] of its ray, traced [`PACKET`] at a time
     /// (see [`Bvh::closest_packet`]).
@@ -871,12 +881,7 @@ impl Bvh {
             return;
         }
         let ray_of = |i: usize| &rays[i.min(n - 1)];
-        let walks: [WalkRay; PACKET] = std::array::from_fn(|i| {
-            let r = ray_of(i);
-            WalkRay::new(r, self.reach(r))
-        });
-        let slabs: [Slab; PACKET] = std::array::from_fn(|i| Slab::new(&walks[i]));
-        let mut t_prune: [f32; PACKET] = std::array::from_fn(|i| walks[i].ray.t_max);
+        let (walks, slabs, mut t_prune) = self.packet_rays(rays, n);
         let mut leaves: [ClosestLeaf<'_>; PACKET] = std::array::from_fn(|i| ClosestLeaf {
             bvh: self,
             ray: ray_of(i),
@@ -888,15 +893,8 @@ impl Bvh {
         let grow = Slab::GROW;
         // Entries: (child, its rays as a bit mask, the least t_near of
         // those rays).
-        let need = self.stack_need();
-        let mut small = [(0u32, 0u32, 0.0f32); 64];
-        let mut big = Vec::new();
-        let stack: &mut [(u32, u32, f32)] = if need <= small.len() {
-            &mut small
-        } else {
-            big.resize(need, (0, 0, 0.0));
-            &mut big
-        };
+        let mut stack = Stack::<(u32, u32, f32)>::default();
+        let stack = stack.slice(self.stack_need());
         let mut sp = 0usize;
         let mut node = self.root;
         let mut active: u32 = (1 << n) - 1;
@@ -1026,23 +1024,11 @@ impl Bvh {
             return;
         }
         let ray_of = |i: usize| &rays[i.min(n - 1)];
-        let walks: [WalkRay; PACKET] = std::array::from_fn(|i| {
-            let r = ray_of(i);
-            WalkRay::new(r, self.reach(r))
-        });
-        let slabs: [Slab; PACKET] = std::array::from_fn(|i| Slab::new(&walks[i]));
-        let mut t_prune: [f32; PACKET] = std::array::from_fn(|i| walks[i].ray.t_max);
+        let (walks, slabs, mut t_prune) = self.packet_rays(rays, n);
         let mut pres: [Option<RayPrecomp>; PACKET] = [None; PACKET];
         // Entries: (child, the mask of its rays).
-        let need = self.stack_need();
-        let mut small = [(0u32, 0u32); 64];
-        let mut big = Vec::new();
-        let stack: &mut [(u32, u32)] = if need <= small.len() {
-            &mut small
-        } else {
-            big.resize(need, (0, 0));
-            &mut big
-        };
+        let mut stack = Stack::<(u32, u32)>::default();
+        let stack = stack.slice(self.stack_need());
         let mut sp = 0usize;
         let mut node = self.root;
         // The rays not yet stopped, and those in the current node.
@@ -1196,6 +1182,36 @@ impl<F: FnMut(u32, TriHit) -> bool> Leaf for EachLeaf<'_, F> {
             .leaf_hits(pre, first, ray.t_min, &mut self.t_max, |id, h, _| {
                 visit(id, h)
             })
+    }
+}
+
+/// A walk's stack: a 64-entry array for the usual trees (cheap to set up
+/// per ray; depth ≤ 9), a heap vector beyond.
+struct Stack<T> {
+    small: [T; 64],
+    big: Vec<T>,
+}
+
+impl<T: Copy + Default> Default for Stack<T> {
+    #[inline(always)]
+    fn default() -> Self {
+        Stack {
+            small: [T::default(); 64],
+            big: Vec::new(),
+        }
+    }
+}
+
+impl<T: Copy + Default> Stack<T> {
+    /// Room for `need` entries.
+    #[inline(always)]
+    fn slice(&mut self, need: usize) -> &mut [T] {
+        if need <= self.small.len() {
+            &mut self.small
+        } else {
+            self.big.resize(need, T::default());
+            &mut self.big
+        }
     }
 }
 
@@ -1462,6 +1478,33 @@ mod tests {
 
     /// A deterministic soup: `n` triangles of size ~`size` in a unit cube,
     /// with a few long thin ones and exact duplicates mixed in (ties).
+    /// 40 rays in 4×2 blocks of a fan around `d` from `o` (spread
+    /// `spread`), every 7th from a second origin, every 5th starting at
+    /// t = 0.3 and every 3rd with a short bound: packets whose rays diverge
+    /// and whose bounds differ.
+    fn packet_fan(o: DVec3, d: DVec3, spread: f64) -> Vec<Ray64> {
+        (0..40u32)
+            .map(|k| {
+                let jitter =
+                    DVec3::new(f64::from(k % 4), f64::from(k / 4 % 2), f64::from(k / 8)) * spread;
+                Ray64 {
+                    origin: if k % 7 == 6 {
+                        DVec3::new(o.y, o.z, o.x)
+                    } else {
+                        o
+                    },
+                    dir: (d + jitter).normalize(),
+                    t_min: if k % 5 == 4 { 0.3 } else { 0.0 },
+                    t_max: if k % 3 == 2 {
+                        0.5 + f64::from(k) * 0.01
+                    } else {
+                        f64::INFINITY
+                    },
+                }
+            })
+            .collect()
+    }
+
     fn soup(n: usize, seed: u64, size: f32) -> Vec<[Vec3; 3]> {
         let mut s = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
         let mut next = move || {
@@ -1685,21 +1728,7 @@ mod tests {
             prop_assume!(d.length() > 1e-3);
             let tris = soup(n, seed, 0.2);
             let mut bvh = build(&tris, false);
-            let rays: Vec<Ray64> = (0..40u32)
-                .map(|k| {
-                    let jitter = DVec3::new(
-                        f64::from(k % 4),
-                        f64::from(k / 4 % 2),
-                        f64::from(k / 8),
-                    ) * spread;
-                    Ray64 {
-                        origin: DVec3::new(ox, oy, oz),
-                        dir: (d + jitter).normalize(),
-                        t_min: 0.0,
-                        t_max: if k % 3 == 2 { 0.4 } else { f64::INFINITY },
-                    }
-                })
-                .collect();
+            let rays = packet_fan(DVec3::new(ox, oy, oz), d, spread);
             let accept = |r: usize, id: u32| !(id + u32::try_from(r).unwrap()).is_multiple_of(reject + 1);
             for path in [SimdPath::Auto, SimdPath::Baseline] {
                 bvh.set_simd(path);
@@ -1781,26 +1810,7 @@ mod tests {
             prop_assume!(d.length() > 1e-3);
             let tris = soup(n, seed, 0.2);
             let mut bvh = build(&tris, false);
-            let rays: Vec<Ray64> = (0..40u32)
-                .map(|k| {
-                    let jitter = DVec3::new(
-                        f64::from(k % 4),
-                        f64::from(k / 4 % 2),
-                        f64::from(k / 8),
-                    ) * spread;
-                    let origin = if k % 7 == 6 {
-                        DVec3::new(oy, oz, ox)
-                    } else {
-                        DVec3::new(ox, oy, oz)
-                    };
-                    Ray64 {
-                        origin,
-                        dir: (d + jitter).normalize(),
-                        t_min: if k % 5 == 4 { 0.3 } else { 0.0 },
-                        t_max: if k % 3 == 2 { 0.5 + f64::from(k) * 0.01 } else { f64::INFINITY },
-                    }
-                })
-                .collect();
+            let rays = packet_fan(DVec3::new(ox, oy, oz), d, spread);
             for path in [SimdPath::Auto, SimdPath::Baseline] {
                 bvh.set_simd(path);
                 for chunk in rays.chunks(size) {

@@ -17,7 +17,7 @@ use rendiff_core::analytic::sphere::sphere_roots;
 use rendiff_core::color::Rgb;
 use rendiff_core::math::{DVec3, Ray64, Vec3, to_f64};
 use rendiff_core::options::Geometry;
-use rendiff_core::shade::{ShadowQuery, Visibility};
+use rendiff_core::shade::{Answered, ShadeContext, ShadowQuery, SurfacePoint, Visibility};
 use rendiff_core::tri_scene::{Prim, TriScene};
 pub use triangle::TriHit;
 
@@ -442,12 +442,16 @@ impl<'a, 's> ShadowRays<'a, 's> {
     }
 }
 
-/// Shadow queries answered together: a batch's queries toward each light
-/// traced as packets ([`ShadowRays::transmittance_packets`]), the answers
-/// kept in the batch's order for [`rendiff_core::shade::Answered`]. Holds
-/// its buffers from batch to batch.
+/// The shadow queries of a batch of samples, answered together: each
+/// sample's queries as `shade` makes them ([`ShadowBatch::add`]), traced
+/// light by light as packets ([`ShadowRays::transmittance_packets`]), and
+/// served back to `shade` sample by sample ([`ShadowBatch::answered`]).
+/// Holds its buffers from batch to batch.
 #[derive(Debug, Default)]
 pub struct ShadowBatch {
+    /// Where each sample's queries start in `answers`.
+    starts: Vec<usize>,
+    /// The queries, and their answers once [`ShadowBatch::answer`] ran.
     answers: Vec<(ShadowQuery, Rgb)>,
     order: Vec<usize>,
     group: Vec<ShadowQuery>,
@@ -455,41 +459,81 @@ pub struct ShadowBatch {
 }
 
 impl ShadowBatch {
-    /// Answers `queries` through `rays` (light by light, in packets) and
-    /// returns them with their answers, in the order given.
-    pub fn answer(
-        &mut self,
-        rays: &ShadowRays<'_, '_>,
-        queries: &[ShadowQuery],
-    ) -> &[(ShadowQuery, Rgb)] {
-        self.answers.clear();
-        self.answers
-            .extend(queries.iter().map(|q| (*q, Rgb::WHITE)));
-        // The queries grouped by light (stable: a light's rays in the
-        // batch's order, neighbours next to each other).
+    /// Adds a sample: the shadow queries `shade` makes at `sp` seen along
+    /// `d` ([`rendiff_core::shade::shadow_queries`]); returns the shading
+    /// normal for [`rendiff_core::shade::shade_with_normal`].
+    pub fn add(&mut self, ctx: &ShadeContext<'_>, sp: &SurfacePoint, d: Vec3) -> Vec3 {
+        self.starts.push(self.answers.len());
+        rendiff_core::shade::shadow_queries(ctx, sp, d, |q| self.answers.push((q, Rgb::WHITE)))
+    }
+
+    /// Adds a sample that makes no shadow queries (a primary ray that
+    /// missed), so that the batch's samples keep their callers' numbers.
+    pub fn add_none(&mut self) {
+        self.starts.push(self.answers.len());
+    }
+
+    /// Samples added since the last [`ShadowBatch::clear`].
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.starts.len()
+    }
+
+    /// `true` when no sample was added since the last clear.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.starts.is_empty()
+    }
+
+    /// Answers every query added, through `rays`: grouped by light (stable,
+    /// so a light's rays keep the samples' order, neighbours together) and
+    /// traced in packets.
+    pub fn answer(&mut self, rays: &ShadowRays<'_, '_>) {
+        let answers = &mut self.answers;
         self.order.clear();
-        self.order.extend(0..queries.len());
-        self.order.sort_by_key(|&k| queries[k].light);
+        self.order.extend(0..answers.len());
+        self.order.sort_by_key(|&k| answers[k].0.light);
         let mut start = 0;
         while start < self.order.len() {
-            let light = queries[self.order[start]].light;
+            let light = answers[self.order[start]].0.light;
             let end = start
                 + self.order[start..]
                     .iter()
-                    .take_while(|&&k| queries[k].light == light)
+                    .take_while(|&&k| answers[k].0.light == light)
                     .count();
             self.group.clear();
             self.group
-                .extend(self.order[start..end].iter().map(|&k| queries[k]));
+                .extend(self.order[start..end].iter().map(|&k| answers[k].0));
             self.group_answers.clear();
             self.group_answers.resize(self.group.len(), Rgb::WHITE);
             rays.transmittance_packets(&self.group, &mut self.group_answers);
             for (&k, &t) in self.order[start..end].iter().zip(&self.group_answers) {
-                self.answers[k].1 = t;
+                answers[k].1 = t;
             }
             start = end;
         }
-        &self.answers
+    }
+
+    /// The visibility that serves sample `k`'s answers to `shade` (any
+    /// other query goes to `fallback`).
+    #[must_use]
+    pub fn answered<'a>(&'a self, k: usize, fallback: &'a dyn Visibility) -> Answered<'a> {
+        let end = self
+            .starts
+            .get(k + 1)
+            .copied()
+            .unwrap_or(self.answers.len());
+        Answered {
+            answers: &self.answers[self.starts[k]..end],
+            fallback,
+            next: std::sync::atomic::AtomicUsize::new(0),
+        }
+    }
+
+    /// Empties the batch.
+    pub fn clear(&mut self) {
+        self.starts.clear();
+        self.answers.clear();
     }
 }
 

@@ -1031,10 +1031,7 @@ struct ShadeBatch {
         rendiff_core::math::Vec3,
         f64,
     )>,
-    /// Where each sample's queries start in `queries`.
-    starts: Vec<usize>,
-    queries: Vec<shade::ShadowQuery>,
-    answers: ShadowBatch,
+    shadows: ShadowBatch,
 }
 
 impl ShadeBatch {
@@ -1050,8 +1047,7 @@ impl ShadeBatch {
         dir: rendiff_core::math::Vec3,
         depth: f64,
     ) {
-        self.starts.push(self.queries.len());
-        let n = shade::shadow_queries(ctx, &sp, dir, |q| self.queries.push(q));
+        let n = self.shadows.add(ctx, &sp, dir);
         self.samples.push((sx, tri, sp, dir, n, depth));
     }
 
@@ -1068,20 +1064,14 @@ impl ShadeBatch {
         rays: &ShadowRays<'_, '_>,
         mut set: impl FnMut(u32, Sample),
     ) {
-        let answers = self.answers.answer(rays, &self.queries);
-        self.starts.push(self.queries.len());
+        self.shadows.answer(rays);
         for (k, (sx, tri, sp, dir, n, depth)) in self.samples.iter().enumerate() {
-            let answered = shade::Answered {
-                answers: &answers[self.starts[k]..self.starts[k + 1]],
-                fallback: rays,
-                next: std::sync::atomic::AtomicUsize::new(0),
-            };
+            let answered = self.shadows.answered(k, rays);
             let shaded = shade::shade_with_normal(ctx, sp, *dir, *n, &answered);
             set(*sx, Sample::hit(shaded.local, *depth, *tri, shaded.flags));
         }
         self.samples.clear();
-        self.starts.clear();
-        self.queries.clear();
+        self.shadows.clear();
     }
 }
 

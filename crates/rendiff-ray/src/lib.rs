@@ -282,8 +282,6 @@ fn render_with(
             let mut at = [(0u32, 0u32); BLOCK];
             let mut hits = [None; BLOCK];
             let mut prepared: [Option<(Prepared, Vec3)>; BLOCK] = [None; BLOCK];
-            let mut starts = [0usize; BLOCK + 1];
-            let mut queries: Vec<shade::ShadowQuery> = Vec::new();
             let mut batch = ShadowBatch::default();
             for tx in (0..sw).step_by(TILE as usize) {
                 let tx1 = (tx + TILE).min(sw);
@@ -307,29 +305,25 @@ fn render_with(
                         // The block's primary shadow queries answered
                         // together (packets per light), then each sample
                         // shaded with its answers and its ray tree traced.
-                        queries.clear();
+                        batch.clear();
                         for k in 0..n {
-                            starts[k] = queries.len();
                             prepared[k] = hits[k].map(|hit| {
                                 let p = tracer.prepare(&rays[k], hit);
-                                let n = shade::shadow_queries(&tracer.ctx, &p.0, p.2, |q| {
-                                    queries.push(q);
-                                });
+                                let n = batch.add(&tracer.ctx, &p.0, p.2);
                                 (p, n)
                             });
+                            if prepared[k].is_none() {
+                                // Keeps the batch's samples numbered as the block's.
+                                batch.add_none();
+                            }
                         }
-                        starts[n] = queries.len();
-                        let answers = batch.answer(&w.vis, &queries);
+                        batch.answer(&w.vis);
                         for k in 0..n {
                             let (sx, y) = at[k];
                             let s = match &prepared[k] {
                                 None => Sample::background(scene.background),
                                 Some((p, n)) => {
-                                    let answered = shade::Answered {
-                                        answers: &answers[starts[k]..starts[k + 1]],
-                                        fallback: &w.vis,
-                                        next: std::sync::atomic::AtomicUsize::new(0),
-                                    };
+                                    let answered = batch.answered(k, &w.vis);
                                     let shaded = shade::shade_with_normal(
                                         &tracer.ctx,
                                         &p.0,
