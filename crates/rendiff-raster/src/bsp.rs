@@ -636,8 +636,9 @@ fn source(
     let perspective = matches!(cam.projection(), Projection::Perspective { .. });
     let idx = scene.tris[tri as usize];
     let v = idx.map(|i| hv[i as usize]);
+    let screen = v.map(|p| p.screen());
     let (poly, tmp) = scratch;
-    let corners: Vec<HVert> = match clip_triangle(&v, ctx, poly, tmp) {
+    let corners: Vec<HVert> = match clip_triangle(&v, &screen, ctx, poly, tmp) {
         Clipped::Whole => v.to_vec(),
         Clipped::Polygon => poly.clone(),
         Clipped::Nothing => return None,

@@ -258,7 +258,30 @@ pub fn render(scene: &TriScene, opts: &RasterOptions) -> (Frame, RasterStats) {
     (frame, stats)
 }
 
-fn homogeneous(scene: &TriScene, perturb: Perturb) -> Vec<HVert> {
+/// The scene's vertices in homogeneous screen space, and the screen
+/// position of each (`HVert::screen`, formed once per vertex: a mesh's
+/// vertex is a corner of about six triangles, and the clip test and the
+/// setup of each asked for its two divisions).
+struct Projected {
+    hv: Vec<HVert>,
+    screen: Vec<(f64, f64)>,
+}
+
+impl std::ops::Deref for Projected {
+    type Target = [HVert];
+
+    fn deref(&self) -> &[HVert] {
+        &self.hv
+    }
+}
+
+fn homogeneous(scene: &TriScene, perturb: Perturb) -> Projected {
+    let hv = homogeneous_vertices(scene, perturb);
+    let screen = hv.par_iter().map(HVert::screen).collect();
+    Projected { hv, screen }
+}
+
+fn homogeneous_vertices(scene: &TriScene, perturb: Perturb) -> Vec<HVert> {
     let cam = &scene.camera;
     let (w, h) = (f64::from(cam.width()), f64::from(cam.height()));
     let a = cam.aspect();
@@ -459,10 +482,12 @@ enum Clipped {
     Nothing,
 }
 
-/// Clips triangle `v` against the near and far planes and, only where a
-/// vertex leaves it, the guard band; the polygon is left in `poly`.
+/// Clips triangle `v` (its vertices' screen positions `screen`) against the
+/// near and far planes and, only where a vertex leaves it, the guard band;
+/// the polygon is left in `poly`.
 fn clip_triangle(
     v: &[HVert; 3],
+    screen: &[(f64, f64); 3],
     ctx: &SetupCtx<'_>,
     poly: &mut Vec<HVert>,
     tmp: &mut Vec<HVert>,
@@ -472,7 +497,7 @@ fn clip_triangle(
     let guard_ok = |p: &(f64, f64)| p.0.abs() < GUARD_PX && p.1.abs() < GUARD_PX;
     // The common case: between the near and far planes and inside the
     // guard band.
-    if v.iter().all(|p| p.z >= near && p.z <= far) && v.iter().all(|p| guard_ok(&p.screen())) {
+    if v.iter().all(|p| p.z >= near && p.z <= far) && screen.iter().all(guard_ok) {
         return Clipped::Whole;
     }
     if v.iter().all(|p| p.z < near) || v.iter().all(|p| p.z > far) {
@@ -516,7 +541,7 @@ fn clamped_screen(p: &HVert, ctx: &SetupCtx<'_>) -> Option<(f64, f64)> {
 }
 
 fn setup_triangle(
-    v: &[HVert; 3],
+    (v, screen): (&[HVert; 3], &[(f64, f64); 3]),
     tri: u32,
     cull_back: bool,
     ctx: &SetupCtx<'_>,
@@ -524,10 +549,9 @@ fn setup_triangle(
     tmp: &mut Vec<HVert>,
     out: &mut Vec<Record>,
 ) -> bool {
-    match clip_triangle(v, ctx, poly, tmp) {
+    match clip_triangle(v, screen, ctx, poly, tmp) {
         Clipped::Whole => {
-            let s = [v[0].screen(), v[1].screen(), v[2].screen()];
-            return push_snapped(&s, tri, cull_back, ctx, out);
+            return push_snapped(screen, tri, cull_back, ctx, out);
         }
         Clipped::Nothing => return false,
         Clipped::Polygon => {}
@@ -792,7 +816,7 @@ impl<'g> SetupCtx<'g> {
 /// faces.
 fn records(
     scene: &TriScene,
-    hv: &[HVert],
+    hv: &Projected,
     range: std::ops::Range<usize>,
     grid: &SampleGrid,
     rule: FillRule,
@@ -809,9 +833,19 @@ fn records(
             culled.frustum += 1;
             continue;
         }
-        let v = scene.tris[t].map(|i| hv[i as usize]);
+        let idx = scene.tris[t];
+        let v = idx.map(|i| hv.hv[i as usize]);
+        let screen = idx.map(|i| hv.screen[i as usize]);
         let tri = u32::try_from(t).unwrap_or(u32::MAX);
-        if setup_triangle(&v, tri, cull_back, &ctx, &mut poly, &mut tmp, &mut out) {
+        if setup_triangle(
+            (&v, &screen),
+            tri,
+            cull_back,
+            &ctx,
+            &mut poly,
+            &mut tmp,
+            &mut out,
+        ) {
             culled.backface += 1;
         }
     }
@@ -823,7 +857,7 @@ fn records(
 fn primary_records(
     scene: &TriScene,
     opts: &RasterOptions,
-    hv: &[HVert],
+    hv: &Projected,
     grid: &SampleGrid,
 ) -> Vec<Record> {
     records(
