@@ -261,7 +261,8 @@ pub fn render(scene: &TriScene, opts: &RasterOptions) -> (Frame, RasterStats) {
 /// The scene's vertices in homogeneous screen space, and the screen
 /// position of each (`HVert::screen`, formed once per vertex: a mesh's
 /// vertex is a corner of about six triangles, and the clip test and the
-/// setup of each asked for its two divisions).
+/// setup of each asked for its two divisions). It derefs to the
+/// homogeneous vertices, which the plane set-up and the BSP read alone.
 struct Projected {
     hv: Vec<HVert>,
     screen: Vec<(f64, f64)>,
