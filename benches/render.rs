@@ -203,6 +203,7 @@ fn bunny_shadow_queries(accel: &Accel<'_>) -> Vec<rendiff::shade::ShadowQuery> {
                 dir: d.normalize(),
                 t_max: d.length(),
                 normal: d.normalize(),
+                leaves: h.prim,
             })
         })
         .collect()

@@ -6,7 +6,15 @@
 //! rendiff-peers povray [SCENE.toml ...] [--threads 1,2] [--repeats N]
 //! rendiff-peers llvmpipe [--repeats N]
 //! rendiff-peers objload [--repeats N]
+//! rendiff-peers profile SCENE.toml [--backend raster|ray] [--subdivide K] [--shadowless] [--repeats N]
 //! ```
+//!
+//! `profile`: one scene rendered `--repeats` times in a row on one thread
+//! (load once, render many), printing the median time: a target for
+//! `perf record` that holds only the render phase POV-Ray is timed
+//! against. `--subdivide K` splits every triangle K times into four and
+//! `--shadowless` makes every light shadowless, as the summary's frames
+//! of the 940 k bunny (the ray tracer then traces a BVH built once).
 //!
 //! `summary` (what `make peers` runs): every comparison below plus the
 //! build at ten million triangles, the raster and ray frames, the whole
@@ -96,7 +104,7 @@ fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let Some(cmd) = args.first() else {
         bail!(
-            "usage: rendiff-peers summary [--repeats N] | embree [SCENE] [--subdivide K] [--repeats N] | povray [SCENE...] [--threads 1,2] [--repeats N] | llvmpipe [--repeats N] | objload [--repeats N]"
+            "usage: rendiff-peers summary [--repeats N] | embree [SCENE] [--subdivide K] [--repeats N] | povray [SCENE...] [--threads 1,2] [--repeats N] | llvmpipe [--repeats N] | objload [--repeats N] | profile SCENE [--backend raster|ray] [--subdivide K] [--shadowless] [--repeats N]"
         );
     };
     let rest = &args[1..];
@@ -124,10 +132,86 @@ fn main() -> Result<()> {
         "summary" => summary::summary(repeats),
         "objload" => summary::obj_load(repeats).map(|_| ()),
         "llvmpipe" => llvmpipe::compare(repeats).map(|_| ()),
+        "profile" => {
+            let scene = positional(rest)
+                .first()
+                .cloned()
+                .context("profile needs a scene")?;
+            let backend = match flag(rest, "--backend").as_deref() {
+                None | Some("raster") => Backend::Raster,
+                Some("ray") => Backend::Ray,
+                Some(other) => bail!("unknown backend {other:?}: expected raster or ray"),
+            };
+            let k: u32 = flag(rest, "--subdivide").map_or(Ok(0), |s| s.parse())?;
+            let shadowless = rest.iter().any(|a| a == "--shadowless");
+            profile(&scene, backend, k, shadowless, repeats)
+        }
         other => bail!(
-            "unknown command {other:?}: expected summary, embree, povray, llvmpipe or objload"
+            "unknown command {other:?}: expected summary, embree, povray, llvmpipe, objload or profile"
         ),
     }
+}
+
+/// Renders one scene `repeats` times on one thread and prints the
+/// median, minimum and maximum of the render phase. Plain, it times
+/// `Prepared::render` (the ray tracer's BVH build included, as the
+/// POV-Ray rows time it); split (`subdivide` > 0) or shadowless, it
+/// times the frames of the summary (`raster::render`, or `ray::render` on
+/// a BVH built once).
+fn profile(
+    scene: &Path,
+    backend: Backend,
+    subdivide: u32,
+    shadowless: bool,
+    repeats: usize,
+) -> Result<()> {
+    let job = Prepared::load(scene, &Overrides::default())?;
+    let p = pool(1)?;
+    let times: Vec<f64> = if subdivide == 0 && !shadowless {
+        (0..repeats.max(1))
+            .map(|_| p.install(|| job.render(backend).map(|r| r.time_ms)))
+            .collect::<Result<_, _>>()?
+    } else {
+        let mut t = job.tri.subdivided(subdivide);
+        let mut opts = job.raster_options();
+        if shadowless {
+            for l in &mut t.lights {
+                l.shadowless = true;
+            }
+            opts.shadows_needed = false;
+        }
+        let accel = (backend == Backend::Ray).then(|| Accel::new(&t, AccelOptions::default()));
+        let ray_opts = rendiff::ray::RayOptions {
+            max_depth: job.settings.max_depth,
+            shadows: !shadowless,
+            gate_eps: rendiff::GATE_EPS,
+        };
+        (0..repeats.max(1))
+            .map(|_| {
+                p.install(|| {
+                    let start = Instant::now();
+                    match &accel {
+                        Some(a) => {
+                            std::hint::black_box(rendiff::ray::render(a, &ray_opts));
+                        }
+                        None => {
+                            std::hint::black_box(rendiff::raster::render(&t, &opts));
+                        }
+                    }
+                    start.elapsed().as_secs_f64() * 1e3
+                })
+            })
+            .collect()
+    };
+    let min = times.iter().copied().fold(f64::INFINITY, f64::min);
+    let max = times.iter().copied().fold(0.0, f64::max);
+    println!(
+        "{} {backend}, 1 thread, {} renders: median {:.2} ms (min {min:.2}, max {max:.2})",
+        scene.display(),
+        times.len(),
+        median(times)
+    );
+    Ok(())
 }
 
 /// Times `f` `repeats` times on a pool of `threads`; the median in ms.
@@ -362,6 +446,7 @@ fn shadow_rays(
                 dir: d.normalize(),
                 t_max: d.length(),
                 normal: d.normalize(),
+                leaves: h.prim,
             })
         })
         .collect()

@@ -50,6 +50,8 @@ const PARALLEL_THRESHOLD: usize = 4096;
 const WIDTH: usize = 8;
 /// Rays in a packet ([`Bvh::intersect_packet`]): one bit each in a `u32` mask.
 pub(crate) const PACKET: usize = 8;
+/// The `skip` of a walk that tests every triangle (no triangle has this id).
+pub(crate) const NO_SKIP: u32 = u32::MAX;
 /// A packet's rays that enter an inner node finish its subtree one by one
 /// when they are this many or fewer (measured: 3 ahead of 1 and of 5).
 const SOLO: u32 = 3;
@@ -653,12 +655,19 @@ impl Bvh {
     }
 
     /// Calls `visit(id, hit)` for every triangle hit with `t` in
-    /// `[ray.t_min, ray.t_max]`, in no particular order; stops when `visit`
+    /// `[ray.t_min, ray.t_max]` but triangle `skip` (which is not tested:
+    /// [`NO_SKIP`] skips none), in no particular order; stops when `visit`
     /// returns `true`.
-    pub(crate) fn for_each_hit(&self, ray: &Ray64, visit: impl FnMut(u32, TriHit) -> bool) {
+    pub(crate) fn for_each_hit(
+        &self,
+        ray: &Ray64,
+        skip: u32,
+        visit: impl FnMut(u32, TriHit) -> bool,
+    ) {
         self.arch.dispatch(EachHit {
             bvh: self,
             ray,
+            skip,
             visit,
         });
     }
@@ -702,7 +711,7 @@ impl Bvh {
 
     /// [`Bvh::for_each_hit`], compiled into each instruction set's copy.
     #[inline(always)]
-    fn each_hit(&self, ray: &Ray64, visit: impl FnMut(u32, TriHit) -> bool) {
+    fn each_hit(&self, ray: &Ray64, skip: u32, visit: impl FnMut(u32, TriHit) -> bool) {
         let walk = WalkRay::new(ray, self.reach(ray));
         let mut t_prune = walk.ray.t_max;
         let mut leaf = EachLeaf {
@@ -711,21 +720,22 @@ impl Bvh {
             walk: &walk,
             pre: None,
             t_max: ray.t_max,
+            skip,
             visit,
         };
         self.traverse(&walk, &mut t_prune, false, &mut leaf);
     }
 
     /// Tests the leaf starting at pack `first`: four triangles at a time
-    /// for the edge test ([`candidates`]), then the survivors one by one
-    /// in `f64`; `hit(id, hit, t_max)` may shrink `t_max` and returns
-    /// `true` to stop.
+    /// for the edge test ([`candidates`]), then the survivors but triangle
+    /// `skip` one by one in `f64`; `hit(id, hit, t_max)` may shrink `t_max`
+    /// and returns `true` to stop.
     #[inline(always)]
     fn leaf_hits(
         &self,
         pre: &RayPrecomp,
         first: usize,
-        t_min: f64,
+        (t_min, skip): (f64, u32),
         t_max: &mut f64,
         mut hit: impl FnMut(u32, TriHit, &mut f64) -> bool,
     ) -> bool {
@@ -736,8 +746,12 @@ impl Bvh {
             while lanes != 0 {
                 let lane = lanes.trailing_zeros() as usize;
                 lanes &= lanes - 1;
+                let id = self.ids[4 * p + lane];
+                if id == skip {
+                    continue;
+                }
                 if let Some(h) = intersect(pre, &pack.triangle(lane), t_min, *t_max)
-                    && hit(self.ids[4 * p + lane], h, t_max)
+                    && hit(id, h, t_max)
                 {
                     return true;
                 }
@@ -976,22 +990,31 @@ impl Bvh {
     }
 
     /// For each ray of `rays`, whether `accept(ray index, triangle, hit)`
-    /// holds for some triangle it hits in `[t_min, t_max]` (into `out`, the
-    /// same length): the answer of [`Bvh::for_each_hit`] stopped at the
-    /// first accepted hit, traced [`PACKET`] rays at a time (see
-    /// [`Bvh::any_packet8`]). `accept` must depend on its arguments only.
+    /// holds for some triangle it hits in `[t_min, t_max]` other than its
+    /// entry of `skips` (into `out`, both the same length): the answer of
+    /// [`Bvh::for_each_hit`] stopped at the first accepted hit, traced
+    /// [`PACKET`] rays at a time (see [`Bvh::any_packet8`]). `accept` must
+    /// depend on its arguments only.
     pub(crate) fn any_packet(
         &self,
         rays: &[Ray64],
+        skips: &[u32],
         mut accept: impl FnMut(usize, u32, TriHit) -> bool,
         out: &mut [bool],
     ) {
         debug_assert_eq!(rays.len(), out.len(), "one answer per ray");
-        for (c, (rays, out)) in rays.chunks(PACKET).zip(out.chunks_mut(PACKET)).enumerate() {
+        debug_assert_eq!(rays.len(), skips.len(), "one skipped triangle per ray");
+        for (c, ((rays, skips), out)) in rays
+            .chunks(PACKET)
+            .zip(skips.chunks(PACKET))
+            .zip(out.chunks_mut(PACKET))
+            .enumerate()
+        {
             let base = c * PACKET;
             self.arch.dispatch(AnyPacket {
                 bvh: self,
                 rays,
+                skips,
                 out,
                 accept: |r: usize, id: u32, h: TriHit| accept(base + r, id, h),
             });
@@ -1008,14 +1031,15 @@ impl Bvh {
     fn any_packet8(
         &self,
         rays: &[Ray64],
+        skips: &[u32],
         out: &mut [bool],
         mut accept: impl FnMut(usize, u32, TriHit) -> bool,
     ) {
-        let n = rays.len().min(out.len()).min(PACKET);
+        let n = rays.len().min(out.len()).min(skips.len()).min(PACKET);
         if n <= 1 || self.root == EMPTY || self.root & LEAF != 0 {
             for (r, (o, ray)) in out.iter_mut().zip(rays).enumerate() {
                 let mut hit = false;
-                self.each_hit(ray, |id, h| {
+                self.each_hit(ray, skips[r], |id, h| {
                     hit = accept(r, id, h);
                     hit
                 });
@@ -1047,6 +1071,7 @@ impl Bvh {
                         walk: &walks[r],
                         pre: pres[r].take(),
                         t_max: ray_of(r).t_max,
+                        skip: skips[r.min(n - 1)],
                         visit: |id, h| {
                             stopped = accept(r, id, h);
                             stopped
@@ -1067,7 +1092,8 @@ impl Bvh {
                     let pre = pres[r].get_or_insert_with(|| RayPrecomp::of(ray, &walks[r]));
                     let mut t_max = ray.t_max;
                     let first = (node & !LEAF) as usize;
-                    if self.leaf_hits(pre, first, ray.t_min, &mut t_max, |id, h, _| {
+                    let skip = skips[r.min(n - 1)];
+                    if self.leaf_hits(pre, first, (ray.t_min, skip), &mut t_max, |id, h, _| {
                         accept(r, id, h)
                     }) {
                         alive &= !(1 << r);
@@ -1150,11 +1176,16 @@ impl Leaf for ClosestLeaf<'_> {
         let (ray, walk) = (self.ray, self.walk);
         let pre = self.pre.get_or_insert_with(|| RayPrecomp::of(ray, walk));
         let best = &mut self.best;
-        self.bvh
-            .leaf_hits(pre, first, ray.t_min, &mut self.best_t, |id, h, best_t| {
+        self.bvh.leaf_hits(
+            pre,
+            first,
+            (ray.t_min, NO_SKIP),
+            &mut self.best_t,
+            |id, h, best_t| {
                 offer(best, best_t, id, h);
                 false
-            });
+            },
+        );
         // Boxes are pruned in f32: never below the f64 distance.
         *t_prune = f32_at_least(self.best_t);
         false
@@ -1169,6 +1200,8 @@ struct EachLeaf<'a, F> {
     /// The triangle test's constants, formed at the first leaf.
     pre: Option<RayPrecomp>,
     t_max: f64,
+    /// The triangle not tested ([`NO_SKIP`]: none).
+    skip: u32,
     visit: F,
 }
 
@@ -1178,10 +1211,13 @@ impl<F: FnMut(u32, TriHit) -> bool> Leaf for EachLeaf<'_, F> {
         let (ray, walk) = (self.ray, self.walk);
         let pre = self.pre.get_or_insert_with(|| RayPrecomp::of(ray, walk));
         let visit = &mut self.visit;
-        self.bvh
-            .leaf_hits(pre, first, ray.t_min, &mut self.t_max, |id, h, _| {
-                visit(id, h)
-            })
+        self.bvh.leaf_hits(
+            pre,
+            first,
+            (ray.t_min, self.skip),
+            &mut self.t_max,
+            |id, h, _| visit(id, h),
+        )
     }
 }
 
@@ -1273,6 +1309,7 @@ impl WithSimd for ClosestPacket<'_> {
 struct AnyPacket<'a, F> {
     bvh: &'a Bvh,
     rays: &'a [Ray64],
+    skips: &'a [u32],
     out: &'a mut [bool],
     accept: F,
 }
@@ -1282,7 +1319,8 @@ impl<F: FnMut(usize, u32, TriHit) -> bool> WithSimd for AnyPacket<'_, F> {
 
     #[inline(always)]
     fn with_simd<S: pulp::Simd>(self, _: S) {
-        self.bvh.any_packet8(self.rays, self.out, self.accept);
+        self.bvh
+            .any_packet8(self.rays, self.skips, self.out, self.accept);
     }
 }
 
@@ -1306,6 +1344,7 @@ impl WithSimd for Closest<'_> {
 struct EachHit<'a, F> {
     bvh: &'a Bvh,
     ray: &'a Ray64,
+    skip: u32,
     visit: F,
 }
 
@@ -1314,7 +1353,7 @@ impl<F: FnMut(u32, TriHit) -> bool> WithSimd for EachHit<'_, F> {
 
     #[inline(always)]
     fn with_simd<S: pulp::Simd>(self, _: S) {
-        self.bvh.each_hit(self.ray, self.visit);
+        self.bvh.each_hit(self.ray, self.skip, self.visit);
     }
 }
 
@@ -1656,11 +1695,19 @@ mod tests {
         let hit = bvh.intersect(&ray).expect("the ray meets the stack");
         assert_eq!(hit.id, 0, "a tie goes to the lowest id");
         let mut count = 0;
-        bvh.for_each_hit(&ray, |_, _| {
+        bvh.for_each_hit(&ray, NO_SKIP, |_, _| {
             count += 1;
             false
         });
         assert_eq!(count, 100);
+        // The skipped triangle alone is not visited.
+        let mut ids = Vec::new();
+        bvh.for_each_hit(&ray, 7, |id, _| {
+            ids.push(id);
+            false
+        });
+        ids.sort_unstable();
+        assert_eq!(ids, (0..100).filter(|&id| id != 7).collect::<Vec<u32>>());
     }
 
     proptest! {
@@ -1696,7 +1743,7 @@ mod tests {
                 prop_assert_eq!(got, want);
                 prop_assert_eq!(flat.intersect(&ray).map(|h| (h.id, h.t64)), want);
                 let mut all = Vec::new();
-                bvh.for_each_hit(&ray, |id, _| {
+                bvh.for_each_hit(&ray, NO_SKIP, |id, _| {
                     all.push(id);
                     false
                 });
@@ -1713,7 +1760,8 @@ mod tests {
         /// A packet's any-hit answers are the single-ray ones (the every-hit
         /// walk stopped at the first accepted hit), with an acceptance that
         /// rejects some triangles (so a ray may pass hits before the one
-        /// that stops it), on both instruction sets, for every packet size.
+        /// that stops it) and a skipped triangle per ray (every other ray
+        /// skips none), on both instruction sets, for every packet size.
         #[test]
         fn packet_any_hits_equal_single_ray_answers(
             seed in 0u64..1000,
@@ -1730,18 +1778,27 @@ mod tests {
             let mut bvh = build(&tris, false);
             let rays = packet_fan(DVec3::new(ox, oy, oz), d, spread);
             let accept = |r: usize, id: u32| !(id + u32::try_from(r).unwrap()).is_multiple_of(reject + 1);
+            // The first triangle each ray hits (or none), skipped by the odd rays.
+            let skips: Vec<u32> = rays
+                .iter()
+                .enumerate()
+                .map(|(r, ray)| match bvh.intersect(ray) {
+                    Some(h) if r % 2 == 1 => h.id,
+                    _ => NO_SKIP,
+                })
+                .collect();
             for path in [SimdPath::Auto, SimdPath::Baseline] {
                 bvh.set_simd(path);
-                for (c, chunk) in rays.chunks(size).enumerate() {
+                for (c, (chunk, skip)) in rays.chunks(size).zip(skips.chunks(size)).enumerate() {
                     let mut got = vec![false; chunk.len()];
-                    bvh.any_packet(chunk, |r, id, _| accept(c * size + r, id), &mut got);
+                    bvh.any_packet(chunk, skip, |r, id, _| accept(c * size + r, id), &mut got);
                     let want: Vec<bool> = chunk
                         .iter()
                         .enumerate()
                         .map(|(r, ray)| {
                             let mut hit = false;
-                            bvh.for_each_hit(ray, |id, _| {
-                                hit = accept(c * size + r, id);
+                            bvh.for_each_hit(ray, NO_SKIP, |id, _| {
+                                hit = id != skip[r] && accept(c * size + r, id);
                                 hit
                             });
                             hit

@@ -230,7 +230,7 @@ impl<'s> Accel<'s> {
     #[must_use]
     pub fn intersect_front(&self, ray: &Ray64) -> Option<Hit> {
         let mut best: Option<Hit> = None;
-        self.bvh.for_each_hit(ray, |id, h| {
+        self.bvh.for_each_hit(ray, bvh::NO_SKIP, |id, h| {
             let nearer = best.is_none_or(|b| h.t64 < b.t64 || (h.t64 == b.t64 && id < b.prim));
             if nearer && !self.faces_along(id, ray.dir) {
                 best = Some(Hit {
@@ -323,11 +323,19 @@ impl<'s> Accel<'s> {
         }
     }
 
+    /// The `f64` segment a shadow query is traced on: to a point light,
+    /// from the query's origin to the light itself; to a parallel light,
+    /// the query's ray widened.
+    #[must_use]
+    pub fn shadow_segment(&self, q: &ShadowQuery) -> Ray64 {
+        shadow_ray(self.scene, q).0
+    }
+
     /// Calls `visit(triangle, hit)` for every triangle hit in
     /// `[ray.t_min, ray.t_max]` (analytic shapes excluded), in no particular
     /// order; stops when `visit` returns `true`.
     pub fn for_each_triangle_hit(&self, ray: &Ray64, visit: impl FnMut(u32, TriHit) -> bool) {
-        self.bvh.for_each_hit(ray, visit);
+        self.bvh.for_each_hit(ray, bvh::NO_SKIP, visit);
     }
 
     /// `true` when `p` lies inside the closed object `object` (parity of
@@ -354,7 +362,7 @@ impl<'s> Accel<'s> {
             t_max: f64::INFINITY,
         };
         let mut crossings = 0u32;
-        self.bvh.for_each_hit(&ray, |id, _| {
+        self.bvh.for_each_hit(&ray, bvh::NO_SKIP, |id, _| {
             if info.tris.contains(&id) {
                 crossings += 1;
             }
@@ -421,14 +429,17 @@ impl<'a, 's> ShadowRays<'a, 's> {
         let scene = a.scene;
         let mut rays = [shadow_ray(scene, &queries[0]).0; bvh::PACKET];
         let mut lights = [None; bvh::PACKET];
+        let mut skips = [bvh::NO_SKIP; bvh::PACKET];
         let mut blocked = [false; bvh::PACKET];
         for (qs, os) in queries.chunks(bvh::PACKET).zip(out.chunks_mut(bvh::PACKET)) {
             for (k, q) in qs.iter().enumerate() {
                 (rays[k], lights[k]) = shadow_ray(scene, q);
+                skips[k] = q.leaves;
             }
             let m = qs.len();
             a.bvh.any_packet(
                 &rays[..m],
+                &skips[..m],
                 |r, id, _| {
                     a.class[id as usize] != ShadowClass::None
                         && !lights[r].is_some_and(|l| plane_through(scene, id, l))
@@ -449,10 +460,12 @@ impl<'a, 's> ShadowRays<'a, 's> {
 /// Holds its buffers from batch to batch.
 #[derive(Debug, Default)]
 pub struct ShadowBatch {
-    /// Where each sample's queries start in `answers`.
+    /// Where each sample's queries start in `queries` (and `answers`).
     starts: Vec<usize>,
-    /// The queries, and their answers once [`ShadowBatch::answer`] ran.
-    answers: Vec<(ShadowQuery, Rgb)>,
+    /// The queries.
+    queries: Vec<ShadowQuery>,
+    /// Each query's light, and its answer once [`ShadowBatch::answer`] ran.
+    answers: Vec<(usize, Rgb)>,
     order: Vec<usize>,
     group: Vec<ShadowQuery>,
     group_answers: Vec<Rgb>,
@@ -463,14 +476,17 @@ impl ShadowBatch {
     /// `d` ([`rendiff_core::shade::shadow_queries`]); returns the shading
     /// normal for [`rendiff_core::shade::shade_with_normal`].
     pub fn add(&mut self, ctx: &ShadeContext<'_>, sp: &SurfacePoint, d: Vec3) -> Vec3 {
-        self.starts.push(self.answers.len());
-        rendiff_core::shade::shadow_queries(ctx, sp, d, |q| self.answers.push((q, Rgb::WHITE)))
+        self.starts.push(self.queries.len());
+        rendiff_core::shade::shadow_queries(ctx, sp, d, |q| {
+            self.answers.push((q.light, Rgb::WHITE));
+            self.queries.push(q);
+        })
     }
 
     /// Adds a sample that makes no shadow queries (a primary ray that
     /// missed), so that the batch's samples keep their callers' numbers.
     pub fn add_none(&mut self) {
-        self.starts.push(self.answers.len());
+        self.starts.push(self.queries.len());
     }
 
     /// Samples added since the last [`ShadowBatch::clear`].
@@ -489,21 +505,31 @@ impl ShadowBatch {
     /// so a light's rays keep the samples' order, neighbours together) and
     /// traced in packets.
     pub fn answer(&mut self, rays: &ShadowRays<'_, '_>) {
-        let answers = &mut self.answers;
+        let (queries, answers) = (&self.queries, &mut self.answers);
+        if queries.iter().all(|q| q.light == queries[0].light) {
+            // One light (or none): no grouping.
+            self.group_answers.clear();
+            self.group_answers.resize(queries.len(), Rgb::WHITE);
+            rays.transmittance_packets(queries, &mut self.group_answers);
+            for (a, &t) in answers.iter_mut().zip(&self.group_answers) {
+                a.1 = t;
+            }
+            return;
+        }
         self.order.clear();
-        self.order.extend(0..answers.len());
-        self.order.sort_by_key(|&k| answers[k].0.light);
+        self.order.extend(0..queries.len());
+        self.order.sort_by_key(|&k| queries[k].light);
         let mut start = 0;
         while start < self.order.len() {
-            let light = answers[self.order[start]].0.light;
+            let light = queries[self.order[start]].light;
             let end = start
                 + self.order[start..]
                     .iter()
-                    .take_while(|&&k| answers[k].0.light == light)
+                    .take_while(|&&k| queries[k].light == light)
                     .count();
             self.group.clear();
             self.group
-                .extend(self.order[start..end].iter().map(|&k| answers[k].0));
+                .extend(self.order[start..end].iter().map(|&k| queries[k]));
             self.group_answers.clear();
             self.group_answers.resize(self.group.len(), Rgb::WHITE);
             rays.transmittance_packets(&self.group, &mut self.group_answers);
@@ -522,7 +548,7 @@ impl ShadowBatch {
             .starts
             .get(k + 1)
             .copied()
-            .unwrap_or(self.answers.len());
+            .unwrap_or(self.queries.len());
         Answered {
             answers: &self.answers[self.starts[k]..end],
             fallback,
@@ -533,6 +559,7 @@ impl ShadowBatch {
     /// Empties the batch.
     pub fn clear(&mut self) {
         self.starts.clear();
+        self.queries.clear();
         self.answers.clear();
     }
 }
@@ -611,7 +638,7 @@ impl Visibility for ShadowRays<'_, '_> {
         // surface through the light itself is not an occluder.
         let mut crossings: Vec<(f64, u32, [f32; 3])> = Vec::new();
         let mut blocked = false;
-        a.bvh.for_each_hit(&ray, |id, h| {
+        a.bvh.for_each_hit(&ray, q.leaves, |id, h| {
             let class = a.class[id as usize];
             if class == ShadowClass::None || light.is_some_and(|l| plane_through(scene, id, l)) {
                 return false;

@@ -246,6 +246,15 @@ pub struct SurfacePoint {
 pub trait Visibility: Sync {
     /// Transmittance of a shadow segment.
     fn transmittance(&self, q: &ShadowQuery) -> Rgb;
+
+    /// Transmittance of the next shadow query [`shade`] makes, toward
+    /// light `light`, which `query` forms. The default forms it and asks
+    /// [`Visibility::transmittance`]; a visibility that answered the
+    /// queries before ([`Answered`]) serves the answer without forming it.
+    fn transmittance_of(&self, light: usize, query: &dyn Fn() -> ShadowQuery) -> Rgb {
+        let _ = light;
+        self.transmittance(&query())
+    }
 }
 
 /// A shadow ray: the segment `origin + t·dir`, `0 < t ≤ t_max`, toward light
@@ -255,6 +264,14 @@ pub trait Visibility: Sync {
 /// it). An occluder whose plane passes through the light within the
 /// rounding of the plane's evaluation does not count (the light-plane rule,
 /// applied where the crossings are found: the accel crate's `ShadowRays`).
+///
+/// `leaves` is the primitive the ray leaves ([`SurfacePoint::prim`]). The
+/// origin lies off that primitive's surface toward the side the ray goes
+/// ([`offset_origin`]), so a ray that leaves a *triangle* cannot meet its
+/// plane again: the ray queries do not test that triangle (its exact test
+/// could only reject it; `tests/it/ray.rs` holds that over every bundled
+/// and hazard scene). A curved analytic surface can be met again (from
+/// inside a sphere) and is always tested.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ShadowQuery {
     /// Index of the light.
@@ -267,6 +284,9 @@ pub struct ShadowQuery {
     pub t_max: f32,
     /// Unit geometric normal of the surface the ray leaves.
     pub normal: Vec3,
+    /// The primitive the ray leaves ([`SurfacePoint::prim`]; `u32::MAX`:
+    /// none): a triangle with this id is not tested.
+    pub leaves: u32,
 }
 
 /// A visibility that never blocks (for shadowless renders and tests).
@@ -470,6 +490,7 @@ fn shadow_query(i: usize, light: &Light, sp: &SurfacePoint, l: Vec3, dist: f32) 
         dir,
         t_max,
         normal: sp.ng,
+        leaves: sp.prim,
     }
 }
 
@@ -501,10 +522,13 @@ pub fn shadow_queries(
 
 /// A [`Visibility`] that answers from a list of queries answered before
 /// (in the order [`shadow_queries`] gave them, which is the order
-/// [`shade`] asks them in), and asks `fallback` for any other query.
+/// [`shade`] asks them in): the `k`-th query [`shade`] makes takes the
+/// `k`-th answer when it is toward the same light, without being formed
+/// again ([`Visibility::transmittance_of`]); any other query goes to
+/// `fallback`.
 pub struct Answered<'a> {
-    /// The queries and their transmittance.
-    pub answers: &'a [(ShadowQuery, Rgb)],
+    /// Each query's light and its transmittance, in query order.
+    pub answers: &'a [(usize, Rgb)],
     /// For a query not in `answers`.
     pub fallback: &'a dyn Visibility,
     /// The next answer expected.
@@ -522,14 +546,18 @@ impl std::fmt::Debug for Answered<'_> {
 
 impl Visibility for Answered<'_> {
     fn transmittance(&self, q: &ShadowQuery) -> Rgb {
+        self.transmittance_of(q.light, &|| *q)
+    }
+
+    fn transmittance_of(&self, light: usize, query: &dyn Fn() -> ShadowQuery) -> Rgb {
         let k = self.next.load(std::sync::atomic::Ordering::Relaxed);
-        if let Some((a, tr)) = self.answers.get(k)
-            && a == q
+        if let Some(&(l, tr)) = self.answers.get(k)
+            && l == light
         {
             self.next.store(k + 1, std::sync::atomic::Ordering::Relaxed);
-            return *tr;
+            return tr;
         }
-        self.fallback.transmittance(q)
+        self.fallback.transmittance(&query())
     }
 }
 
@@ -581,7 +609,7 @@ pub fn shade_with_normal(
         }
         let mut lc = light.color * light.attenuation(dist);
         if !light.shadowless && ctx.shadows {
-            let tr = vis.transmittance(&shadow_query(i, light, sp, l, dist));
+            let tr = vis.transmittance_of(i, &|| shadow_query(i, light, sp, l, dist));
             if tr != Rgb::WHITE {
                 flags |= shadow_flag(i);
             }
