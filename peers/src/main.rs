@@ -6,7 +6,7 @@
 //! rendiff-peers povray [SCENE.toml ...] [--threads 1,2] [--repeats N]
 //! rendiff-peers llvmpipe [--repeats N]
 //! rendiff-peers objload [--repeats N]
-//! rendiff-peers profile SCENE.toml [--backend raster|ray] [--subdivide K] [--shadowless] [--repeats N]
+//! rendiff-peers profile SCENE.toml [--backend raster|ray] [--subdivide K] [--shadowless] [--build] [--repeats N]
 //! ```
 //!
 //! `profile`: one scene rendered `--repeats` times in a row on one thread
@@ -14,7 +14,8 @@
 //! `perf record` that holds only the render phase POV-Ray is timed
 //! against. `--subdivide K` splits every triangle K times into four and
 //! `--shadowless` makes every light shadowless, as the summary's frames
-//! of the 940 k bunny (the ray tracer then traces a BVH built once).
+//! of the 940 k bunny (the ray tracer then traces a BVH built once);
+//! `--build` times the BVH build alone.
 //!
 //! `summary` (what `make peers` runs): every comparison below plus the
 //! build at ten million triangles, the raster and ray frames, the whole
@@ -104,7 +105,7 @@ fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let Some(cmd) = args.first() else {
         bail!(
-            "usage: rendiff-peers summary [--repeats N] | embree [SCENE] [--subdivide K] [--repeats N] | povray [SCENE...] [--threads 1,2] [--repeats N] | llvmpipe [--repeats N] | objload [--repeats N] | profile SCENE [--backend raster|ray] [--subdivide K] [--shadowless] [--repeats N]"
+            "usage: rendiff-peers summary [--repeats N] | embree [SCENE] [--subdivide K] [--repeats N] | povray [SCENE...] [--threads 1,2] [--repeats N] | llvmpipe [--repeats N] | objload [--repeats N] | profile SCENE [--backend raster|ray] [--subdivide K] [--shadowless] [--build] [--repeats N]"
         );
     };
     let rest = &args[1..];
@@ -144,7 +145,11 @@ fn main() -> Result<()> {
             };
             let k: u32 = flag(rest, "--subdivide").map_or(Ok(0), |s| s.parse())?;
             let shadowless = rest.iter().any(|a| a == "--shadowless");
-            profile(&scene, backend, k, shadowless, repeats)
+            if rest.iter().any(|a| a == "--build") {
+                profile_build(&scene, k, repeats)
+            } else {
+                profile(&scene, backend, k, shadowless, repeats)
+            }
         }
         other => bail!(
             "unknown command {other:?}: expected summary, embree, povray, llvmpipe, objload or profile"
@@ -208,6 +213,33 @@ fn profile(
     println!(
         "{} {backend}, 1 thread, {} renders: median {:.2} ms (min {min:.2}, max {max:.2})",
         scene.display(),
+        times.len(),
+        median(times)
+    );
+    Ok(())
+}
+
+/// Builds the BVH of a scene (split `subdivide` times) `repeats` times on
+/// one thread and prints the median, minimum and maximum.
+fn profile_build(scene: &Path, subdivide: u32, repeats: usize) -> Result<()> {
+    let job = Prepared::load(scene, &Overrides::default())?;
+    let t = job.tri.subdivided(subdivide);
+    let p = pool(1)?;
+    let times: Vec<f64> = (0..repeats.max(1))
+        .map(|_| {
+            p.install(|| {
+                let start = Instant::now();
+                std::hint::black_box(Accel::new(&t, AccelOptions::default()));
+                start.elapsed().as_secs_f64() * 1e3
+            })
+        })
+        .collect();
+    let min = times.iter().copied().fold(f64::INFINITY, f64::min);
+    let max = times.iter().copied().fold(0.0, f64::max);
+    println!(
+        "{} split {subdivide} times ({} triangles): BVH build, 1 thread, {} builds: median {:.1} ms (min {min:.1}, max {max:.1})",
+        scene.display(),
+        t.len(),
         times.len(),
         median(times)
     );

@@ -25,8 +25,8 @@ use glam::Vec4;
 use pulp::WithSimd;
 
 use super::SimdPath;
-use super::triangle::{RayPrecomp, TriHit, TriPack, WalkRay, candidates, f32_at_least, intersect};
-use rendiff_core::math::{Aabb, DVec3, Ray64, Vec3, gamma, to_f64};
+use super::triangle::{RayPrecomp, TriHit, TriPack, WalkRay, candidates, intersect};
+use rendiff_core::math::{Aabb, DVec3, Ray64, Vec3, f32_at_least, gamma, to_f64};
 
 /// Child slot encoding: the high bit marks a leaf.
 const LEAF: u32 = 1 << 31;
@@ -733,7 +733,7 @@ impl Bvh {
     #[inline(always)]
     fn leaf_hits(
         &self,
-        pre: &RayPrecomp,
+        pre: &mut RayPrecomp,
         first: usize,
         (t_min, skip): (f64, u32),
         t_max: &mut f64,
@@ -929,16 +929,16 @@ impl Bvh {
                 }
             } else {
                 let nd = &self.nodes[node as usize];
-                let mut rays_of = [0u32; WIDTH];
+                let mut by_ray = 0u64;
                 let mut key = [f32::INFINITY; WIDTH];
                 let mut m = active;
                 while m != 0 {
                     let r = m.trailing_zeros() as usize;
                     m &= m - 1;
                     let (mask, tn) = slabs[r].test(nd, t_prune[r]);
+                    by_ray |= u64::from(mask) << (8 * r);
                     for k in 0..WIDTH {
                         let hit = (mask >> k) & 1;
-                        rays_of[k] |= hit << r;
                         key[k] = if hit != 0 {
                             lane_min(key[k], tn[k])
                         } else {
@@ -946,10 +946,7 @@ impl Bvh {
                         };
                     }
                 }
-                let mask = rays_of
-                    .iter()
-                    .enumerate()
-                    .fold(0u32, |acc, (k, &r)| acc | (u32::from(r != 0) << k));
+                let (mask, rays_of) = rays_by_child(by_ray);
                 if mask != 0 {
                     let (near, rest, m) = order_children(mask, &key, true);
                     for &k in &rest[..m] {
@@ -1101,20 +1098,15 @@ impl Bvh {
                 }
             } else {
                 let nd = &self.nodes[node as usize];
-                let mut rays_of = [0u32; WIDTH];
+                let mut by_ray = 0u64;
                 let mut m = active;
                 while m != 0 {
                     let r = m.trailing_zeros() as usize;
                     m &= m - 1;
                     let (mask, _) = slabs[r].test(nd, t_prune[r]);
-                    for (k, rays) in rays_of.iter_mut().enumerate() {
-                        *rays |= ((mask >> k) & 1) << r;
-                    }
+                    by_ray |= u64::from(mask) << (8 * r);
                 }
-                let mut mask = rays_of
-                    .iter()
-                    .enumerate()
-                    .fold(0u32, |acc, (k, &r)| acc | (u32::from(r != 0) << k));
+                let (mut mask, rays_of) = rays_by_child(by_ray);
                 if mask != 0 {
                     let near = mask.trailing_zeros() as usize;
                     mask &= mask - 1;
@@ -1146,6 +1138,32 @@ impl Bvh {
             *o = alive & (1 << r) == 0;
         }
     }
+}
+
+/// The children a packet's rays enter, from each ray's mask of children
+/// (byte `r` of `by_ray`: bit `k` set when ray `r` enters child `k`): the
+/// mask of children some ray enters, and each child's mask of rays. The
+/// 8×8 bit matrix is transposed by three exchanges of its off-diagonal
+/// blocks (2×2, 4×4, then 8×8 bits; Hacker's Delight §7-3) instead of a
+/// loop over every ray and child.
+#[inline(always)]
+fn rays_by_child(by_ray: u64) -> (u32, [u32; WIDTH]) {
+    const _: () = assert!(WIDTH == 8 && PACKET == 8, "an 8×8 bit matrix");
+    let mut x = by_ray;
+    let t = (x ^ (x >> 7)) & 0x00AA_00AA_00AA_00AA;
+    x ^= t ^ (t << 7);
+    let t = (x ^ (x >> 14)) & 0x0000_CCCC_0000_CCCC;
+    x ^= t ^ (t << 14);
+    let t = (x ^ (x >> 28)) & 0x0000_0000_F0F0_F0F0;
+    x ^= t ^ (t << 28);
+    let bytes = x.to_le_bytes();
+    let mut mask = 0u32;
+    let mut rays = [0u32; WIDTH];
+    for (k, (r, b)) in rays.iter_mut().zip(bytes).enumerate() {
+        *r = u32::from(b);
+        mask |= u32::from(b != 0) << k;
+    }
+    (mask, rays)
 }
 
 /// A leaf test of a walk ([`Bvh::traverse`]). A trait with an
@@ -1577,11 +1595,11 @@ mod tests {
 
     /// The closest hit by testing every triangle (ties to the lower id).
     fn linear(tris: &[[Vec3; 3]], ray: &Ray64, reach: f64) -> Option<(u32, f64)> {
-        let pre = RayPrecomp::new(ray, reach);
+        let mut pre = RayPrecomp::new(ray, reach);
         let (t_min, t_max) = (ray.t_min, ray.t_max);
         let mut best: Option<(u32, f64)> = None;
         for (id, v) in tris.iter().enumerate() {
-            if let Some(h) = intersect(&pre, v, t_min, t_max) {
+            if let Some(h) = intersect(&mut pre, v, t_min, t_max) {
                 let id = u32::try_from(id).unwrap();
                 if best.is_none_or(|(_, t)| h.t64 < t) {
                     best = Some((id, h.t64));
@@ -1651,6 +1669,32 @@ mod tests {
                     }
                 }
             }
+        }
+    }
+
+    /// The transpose of the rays' child masks is the loop over every ray
+    /// and child it replaces.
+    #[test]
+    fn rays_by_child_transposes_the_masks() {
+        let mut z = 0x9e37_79b9_7f4a_7c15u64;
+        for _ in 0..10_000 {
+            z = z
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            // Some rays with no child, some children with no ray.
+            let by_ray = z & (z >> 3);
+            let mut want = [0u32; WIDTH];
+            for r in 0..PACKET {
+                let mask = (by_ray >> (8 * r)) & 0xFF;
+                for (k, w) in want.iter_mut().enumerate() {
+                    *w |= u32::try_from((mask >> k) & 1).unwrap() << r;
+                }
+            }
+            let want_mask = want
+                .iter()
+                .enumerate()
+                .fold(0u32, |acc, (k, &r)| acc | (u32::from(r != 0) << k));
+            assert_eq!(rays_by_child(by_ray), (want_mask, want), "{by_ray:#x}");
         }
     }
 
@@ -1748,10 +1792,10 @@ mod tests {
                     false
                 });
                 all.sort_unstable();
-                let pre = RayPrecomp::new(&ray, bvh.reach(&ray));
+                let mut pre = RayPrecomp::new(&ray, bvh.reach(&ray));
                 let (t_min, t_max) = (ray.t_min, ray.t_max);
                 let every: Vec<u32> = (0..u32::try_from(n).unwrap())
-                    .filter(|&id| intersect(&pre, &tris[id as usize], t_min, t_max).is_some())
+                    .filter(|&id| intersect(&mut pre, &tris[id as usize], t_min, t_max).is_some())
                     .collect();
                 prop_assert_eq!(all, every);
             }

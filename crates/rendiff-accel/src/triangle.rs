@@ -35,7 +35,9 @@
 
 use glam::{DVec3, Vec4};
 
-use rendiff_core::math::{F32_EPS, Ray, Ray64, Vec3, gamma64, to_f32, to_f64};
+use rendiff_core::math::{
+    F32_EPS, Ray, Ray64, Vec3, f32_at_least, f32_at_most, gamma64, to_f32, to_f64,
+};
 
 /// Rounding bounds of the `f32` edge functions of [`candidates`].
 ///
@@ -115,14 +117,20 @@ impl WalkRay {
 
 /// Per-ray constants of the watertight test: the `f64` ray that decides,
 /// and the shear of the nearest `f32` ray ([`WalkRay`]) that filters.
+/// The `f64` shear (three divisions) is formed at the ray's first `f64`
+/// test ([`RayPrecomp::shear64`]): most rays that reach a leaf, and most
+/// shadow rays (which skip the triangle they leave), never make one.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct RayPrecomp {
     /// Axis permutation: the dominant axis of the direction is `kz`.
     pub k: [usize; 3],
-    /// The `f64` origin.
+    /// The `f64` ray.
     origin64: DVec3,
-    /// Shear constants of the `f64` direction (permuted by `k`).
+    dir64: DVec3,
+    /// Shear constants of the `f64` direction (permuted by `k`), once
+    /// formed (`s64_formed`).
     s64: [f64; 3],
+    s64_formed: bool,
     /// The `f32` origin's coordinates, each in four lanes (for [`candidates`]).
     o4: [Vec4; 3],
     /// The `f32` `Sx` and `Sy` in four lanes.
@@ -161,16 +169,29 @@ impl RayPrecomp {
             std::mem::swap(&mut kx, &mut ky);
         }
         let s = Vec3::new(d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]);
-        let d64 = ray.dir;
         let m_shift = f32_at_least(2.0 * walk.dorigin / f64::from(GAMMA_10));
         RayPrecomp {
             k: [kx, ky, kz],
             origin64: ray.origin,
-            s64: [d64[kx] / d64[kz], d64[ky] / d64[kz], 1.0 / d64[kz]],
+            dir64: ray.dir,
+            s64: [0.0; 3],
+            s64_formed: false,
             o4: [Vec4::splat(o.x), Vec4::splat(o.y), Vec4::splat(o.z)],
             s4: [Vec4::splat(s.x), Vec4::splat(s.y)],
             m_shift: Vec4::splat(m_shift),
         }
+    }
+
+    /// The shear constants of the `f64` direction, formed at the first call.
+    #[inline(always)]
+    fn shear64(&mut self) -> [f64; 3] {
+        if !self.s64_formed {
+            let [kx, ky, kz] = self.k;
+            let d = self.dir64;
+            self.s64 = [d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]];
+            self.s64_formed = true;
+        }
+        self.s64
     }
 }
 
@@ -279,9 +300,14 @@ pub struct TriHit {
 #[must_use]
 #[inline(always)]
 #[expect(clippy::similar_names, reason = "the paper's names")]
-pub(crate) fn intersect(pre: &RayPrecomp, v: &[Vec3; 3], t_min: f64, t_max: f64) -> Option<TriHit> {
+pub(crate) fn intersect(
+    pre: &mut RayPrecomp,
+    v: &[Vec3; 3],
+    t_min: f64,
+    t_max: f64,
+) -> Option<TriHit> {
     let [kx, ky, kz] = pre.k;
-    let [sx, sy, sz] = pre.s64;
+    let [sx, sy, sz] = pre.shear64();
     let o = pre.origin64;
     let shear = |p: Vec3| {
         let a = to_f64(p) - o;
@@ -333,53 +359,6 @@ pub(crate) fn intersect(pre: &RayPrecomp, v: &[Vec3; 3], t_min: f64, t_max: f64)
     })
 }
 
-/// The smallest `f32` not below `t` (a traversal bound that never cuts off
-/// a hit at `t`).
-///
-/// Without branches (a ray's bounds and inflation fall either way at
-/// random, and a mispredicted branch costs more than the whole test): the
-/// rounding `r` and its successor are both formed and one is selected.
-/// The successor is one step of the bit pattern away from zero for
-/// `r ≥ +0` and toward zero for `r < 0` (`r = −∞` steps to `−f32::MAX`);
-/// it is chosen only when `r < t`, so never for `r = +∞`, NaN, or a `−0`
-/// (which only a `t ≤ 0` rounds to). Exactly `r.next_up()` where chosen
-/// (a unit test holds it to that).
-#[must_use]
-#[inline(always)]
-pub(crate) fn f32_at_least(t: f64) -> f32 {
-    #[expect(
-        clippy::cast_possible_truncation,
-        reason = "rounded, then corrected upward"
-    )]
-    let r = t as f32;
-    let bits = r.to_bits();
-    let up = f32::from_bits(if r.is_sign_negative() {
-        bits.wrapping_sub(1)
-    } else {
-        bits.wrapping_add(1)
-    });
-    if f64::from(r) < t { up } else { r }
-}
-
-/// The largest `f32` not above `t` (branch-free as [`f32_at_least`]:
-/// exactly `r.next_down()` where the rounding `r` lies above `t`).
-#[must_use]
-#[inline(always)]
-pub(crate) fn f32_at_most(t: f64) -> f32 {
-    #[expect(
-        clippy::cast_possible_truncation,
-        reason = "rounded, then corrected downward"
-    )]
-    let r = t as f32;
-    let bits = r.to_bits();
-    let down = f32::from_bits(if r.is_sign_negative() {
-        bits.wrapping_add(1)
-    } else {
-        bits.wrapping_sub(1)
-    });
-    if f64::from(r) > t { down } else { r }
-}
-
 #[cfg(test)]
 #[allow(
     clippy::cast_possible_truncation,
@@ -390,62 +369,6 @@ pub(crate) fn f32_at_most(t: f64) -> f32 {
 )]
 mod tests {
     use super::*;
-
-    /// The branch-free roundings are exactly "round, then step with
-    /// `next_up`/`next_down` where the rounding fell on the wrong side",
-    /// at the edges of the format (zeros, subnormals, the largest finite,
-    /// infinities, NaN) and on values between every pair of neighbours.
-    #[test]
-    fn directed_roundings_match_next_up_and_next_down() {
-        let reference_up = |t: f64| {
-            let r = t as f32;
-            if f64::from(r) < t { r.next_up() } else { r }
-        };
-        let reference_down = |t: f64| {
-            let r = t as f32;
-            if f64::from(r) > t { r.next_down() } else { r }
-        };
-        let mut values = vec![
-            0.0,
-            -0.0,
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-            f64::NAN,
-            f64::from(f32::MAX),
-            -f64::from(f32::MAX),
-            f64::from(f32::MAX) * (1.0 + 1e-9),
-            -f64::from(f32::MAX) * (1.0 + 1e-9),
-            f64::MAX,
-            -f64::MAX,
-            1e-300,
-            -1e-300,
-            f64::from(f32::MIN_POSITIVE),
-            f64::from(f32::from_bits(1)),
-            f64::from(f32::from_bits(1)) * 0.5,
-            f64::from(f32::from_bits(1)) * 0.25,
-            -f64::from(f32::from_bits(1)) * 0.25,
-        ];
-        let mut z = 0x1234_5678_9abc_def0u64;
-        for _ in 0..20_000 {
-            z = z
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(1_442_695_040_888_963_407);
-            let f = f32::from_bits((z >> 32) as u32);
-            if f.is_finite() {
-                let next = f.next_up();
-                values.extend([f64::from(f), (f64::from(f) + f64::from(next)) / 2.0]);
-                values.push(f64::from(f) + (f64::from(next) - f64::from(f)) * 1e-3);
-            }
-        }
-        for t in values {
-            let (up, down) = (f32_at_least(t), f32_at_most(t));
-            assert_eq!(up.to_bits(), reference_up(t).to_bits(), "at least {t:e}");
-            assert_eq!(down.to_bits(), reference_down(t).to_bits(), "at most {t:e}");
-            if !t.is_nan() {
-                assert!(f64::from(up) >= t && f64::from(down) <= t, "{t:e}");
-            }
-        }
-    }
 
     fn ray(o: Vec3, d: Vec3) -> Ray {
         Ray {
@@ -461,7 +384,7 @@ mod tests {
         let tri = [Vec3::ZERO, Vec3::X, Vec3::Y];
         let r = ray(Vec3::new(0.25, 0.25, 1.0), -Vec3::Z);
         let h = intersect(
-            &RayPrecomp::new(&Ray64::from(&r), f64::INFINITY),
+            &mut RayPrecomp::new(&Ray64::from(&r), f64::INFINITY),
             &tri,
             0.0,
             f64::INFINITY,
@@ -472,7 +395,7 @@ mod tests {
         let r = ray(Vec3::new(0.75, 0.75, 1.0), -Vec3::Z);
         assert!(
             intersect(
-                &RayPrecomp::new(&Ray64::from(&r), f64::INFINITY),
+                &mut RayPrecomp::new(&Ray64::from(&r), f64::INFINITY),
                 &tri,
                 0.0,
                 f64::INFINITY
@@ -483,7 +406,7 @@ mod tests {
         let r = ray(Vec3::new(0.25, 0.25, 1.0), Vec3::Z);
         assert!(
             intersect(
-                &RayPrecomp::new(&Ray64::from(&r), f64::INFINITY),
+                &mut RayPrecomp::new(&Ray64::from(&r), f64::INFINITY),
                 &tri,
                 0.0,
                 f64::INFINITY
@@ -512,9 +435,9 @@ mod tests {
             // Aim so the ray crosses the plane exactly on the diagonal.
             let target = Vec3::new(s, s, 0.0);
             let r = ray(r.origin, target - r.origin);
-            let pre = RayPrecomp::new(&Ray64::from(&r), f64::INFINITY);
-            let hit = intersect(&pre, &t1, 0.0, f64::INFINITY).is_some()
-                || intersect(&pre, &t2, 0.0, f64::INFINITY).is_some();
+            let mut pre = RayPrecomp::new(&Ray64::from(&r), f64::INFINITY);
+            let hit = intersect(&mut pre, &t1, 0.0, f64::INFINITY).is_some()
+                || intersect(&mut pre, &t2, 0.0, f64::INFINITY).is_some();
             assert!(hit, "ray {k} slipped through the shared edge");
         }
     }
@@ -566,11 +489,11 @@ mod tests {
                 t_min: 0.0,
                 t_max: f64::INFINITY,
             };
-            let pre = RayPrecomp::new(&ray, dist * 4.0 + scale * 4.0);
+            let mut pre = RayPrecomp::new(&ray, dist * 4.0 + scale * 4.0);
             let mut pack = TriPack::EMPTY;
             pack.lanes = 1;
             pack.set(0, tri);
-            let accepted = intersect(&pre, &tri, 0.0, f64::INFINITY).is_some();
+            let accepted = intersect(&mut pre, &tri, 0.0, f64::INFINITY).is_some();
             let lanes = candidates(&pre, &pack);
             assert!(
                 !accepted || lanes & 1 == 1,

@@ -430,9 +430,118 @@ pub fn to_f64(v: Vec3) -> DVec3 {
     DVec3::new(f64::from(v.x), f64::from(v.y), f64::from(v.z))
 }
 
+/// The smallest `f32` not below `t` (a traversal bound that never cuts off
+/// a hit at `t`, an error bound that never falls below the `f64` one).
+///
+/// Without branches (a ray's bounds and inflation fall either way at
+/// random, and a mispredicted branch costs more than the whole test): the
+/// rounding `r` and its successor are both formed and one is selected.
+/// The successor is one step of the bit pattern away from zero for
+/// `r ≥ +0` and toward zero for `r < 0` (`r = −∞` steps to `−f32::MAX`);
+/// it is chosen only when `r < t`, so never for `r = +∞`, NaN, or a `−0`
+/// (which only a `t ≤ 0` rounds to). Exactly `r.next_up()` where chosen
+/// (a unit test holds it to that).
+#[must_use]
+#[inline(always)]
+pub fn f32_at_least(t: f64) -> f32 {
+    #[expect(
+        clippy::cast_possible_truncation,
+        reason = "rounded, then corrected upward"
+    )]
+    let r = t as f32;
+    let bits = r.to_bits();
+    let up = f32::from_bits(if r.is_sign_negative() {
+        bits.wrapping_sub(1)
+    } else {
+        bits.wrapping_add(1)
+    });
+    if f64::from(r) < t { up } else { r }
+}
+
+/// The largest `f32` not above `t` (branch-free as [`f32_at_least`]:
+/// exactly `r.next_down()` where the rounding `r` lies above `t`).
+#[must_use]
+#[inline(always)]
+pub fn f32_at_most(t: f64) -> f32 {
+    #[expect(
+        clippy::cast_possible_truncation,
+        reason = "rounded, then corrected downward"
+    )]
+    let r = t as f32;
+    let bits = r.to_bits();
+    let down = f32::from_bits(if r.is_sign_negative() {
+        bits.wrapping_add(1)
+    } else {
+        bits.wrapping_sub(1)
+    });
+    if f64::from(r) > t { down } else { r }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The branch-free roundings are exactly "round, then step with
+    /// `next_up`/`next_down` where the rounding fell on the wrong side",
+    /// at the edges of the format (zeros, subnormals, the largest finite,
+    /// infinities, NaN) and on values between every pair of neighbours.
+    #[test]
+    fn directed_roundings_match_next_up_and_next_down() {
+        #![allow(
+            clippy::cast_possible_truncation,
+            clippy::cast_precision_loss,
+            clippy::cast_sign_loss,
+            clippy::cast_possible_wrap
+        )]
+        let reference_up = |t: f64| {
+            let r = t as f32;
+            if f64::from(r) < t { r.next_up() } else { r }
+        };
+        let reference_down = |t: f64| {
+            let r = t as f32;
+            if f64::from(r) > t { r.next_down() } else { r }
+        };
+        let mut values = vec![
+            0.0,
+            -0.0,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+            f64::from(f32::MAX),
+            -f64::from(f32::MAX),
+            f64::from(f32::MAX) * (1.0 + 1e-9),
+            -f64::from(f32::MAX) * (1.0 + 1e-9),
+            f64::MAX,
+            -f64::MAX,
+            1e-300,
+            -1e-300,
+            f64::from(f32::MIN_POSITIVE),
+            f64::from(f32::from_bits(1)),
+            f64::from(f32::from_bits(1)) * 0.5,
+            f64::from(f32::from_bits(1)) * 0.25,
+            -f64::from(f32::from_bits(1)) * 0.25,
+        ];
+        let mut z = 0x1234_5678_9abc_def0u64;
+        for _ in 0..20_000 {
+            z = z
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            let f = f32::from_bits((z >> 32) as u32);
+            if f.is_finite() {
+                let next = f.next_up();
+                values.extend([f64::from(f), (f64::from(f) + f64::from(next)) / 2.0]);
+                values.push(f64::from(f) + (f64::from(next) - f64::from(f)) * 1e-3);
+            }
+        }
+        for t in values {
+            let (up, down) = (f32_at_least(t), f32_at_most(t));
+            assert_eq!(up.to_bits(), reference_up(t).to_bits(), "at least {t:e}");
+            assert_eq!(down.to_bits(), reference_down(t).to_bits(), "at most {t:e}");
+            if !t.is_nan() {
+                assert!(f64::from(up) >= t && f64::from(down) <= t, "{t:e}");
+            }
+        }
+    }
 
     #[test]
     fn transform_order_is_first_entry_first() {

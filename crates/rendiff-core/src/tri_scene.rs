@@ -12,7 +12,8 @@ use crate::analytic::{AnalyticKind, Placed};
 use crate::camera::Camera;
 use crate::color::Rgb;
 use crate::math::{
-    Aabb, Bary, DVec3, F32_EPS, Vec2, Vec3, gamma64, plane_barycentrics, to_f32, to_f64,
+    Aabb, Bary, DVec3, F32_EPS, Vec2, Vec3, f32_at_least, gamma64, plane_barycentrics, to_f32,
+    to_f64,
 };
 use crate::shade::{Light, Material, ShadeContext, SurfacePoint};
 
@@ -341,14 +342,7 @@ impl TriScene {
     #[must_use]
     #[inline]
     pub fn geometric_normal(&self, tri: u32) -> Vec3 {
-        let [a, b, c] = self.triangle(tri);
-        let n = (b - a).cross(c - a);
-        if n.is_finite() {
-            n.normalize_or_zero()
-        } else {
-            // Edges so long their products overflow f32: take it in f64.
-            to_f32(to_f64(b - a).cross(to_f64(c - a)).normalize_or_zero())
-        }
+        unit_normal(self.triangle(tri))
     }
 
     /// The weights a camera ray `(o, d)` (the `f64` primary ray of a
@@ -362,12 +356,18 @@ impl TriScene {
     /// snapping can leave a sliver) the centroid stands in.
     #[must_use]
     pub fn view_weights(&self, tri: u32, o: DVec3, d: DVec3) -> (Bary, DVec3) {
-        let v = self.triangle_f64(tri);
-        let w = plane_barycentrics(o, d, v).map_or([1.0 / 3.0; 3], |(w, _)| w);
-        let b = Bary::from_f64(w);
-        let s = w[0] + w[1] + w[2];
-        let p = (v[0] * w[0] + v[1] * w[1] + v[2] * w[2]) / s;
-        (b, p)
+        view_weights_of(self.triangle(tri), o, d)
+    }
+
+    /// [`TriScene::view_weights`] and [`TriScene::surface_at`] at them, with
+    /// the triangle's vertices read once: the shading inputs of a camera
+    /// ray's hit (or any ray's) and the `f64` point, bit for bit the two
+    /// calls'.
+    #[must_use]
+    pub fn view_surface(&self, tri: u32, o: DVec3, d: DVec3) -> (SurfacePoint, DVec3) {
+        let v = self.triangle(tri);
+        let (b, p) = view_weights_of(v, o, d);
+        (self.surface_on(tri, v, b), p)
     }
 
     /// Shading inputs of triangle `tri` at barycentric weights `b`.
@@ -383,10 +383,15 @@ impl TriScene {
     /// which is what `p_error` bounds (the offset of rays leaving it).
     #[must_use]
     pub fn surface_at(&self, tri: u32, b: Bary) -> SurfacePoint {
+        self.surface_on(tri, self.triangle(tri), b)
+    }
+
+    /// [`TriScene::surface_at`] given the triangle's vertices `v`.
+    #[inline]
+    fn surface_on(&self, tri: u32, v: [Vec3; 3], b: Bary) -> SurfacePoint {
         let i = tri as usize;
-        let v = self.triangle(tri);
         let (p, p_error) = plane_point(v, b);
-        let mut ng = self.geometric_normal(tri);
+        let mut ng = unit_normal(v);
         let n_idx = self.tri_normals[i];
         let mut ns = if n_idx[0] == NO_INDEX {
             ng
@@ -559,6 +564,31 @@ impl TriScene {
 /// once, and a bound per axis on its distance from the exact point of the
 /// triangle's plane with those weights: the final rounding (2⁻²⁴ of each
 /// coordinate) plus the `f64` arithmetic (γ₈ of `Σ|b_i v_i|`), rounded up.
+/// Unit geometric normal `(v1 − v0) × (v2 − v0)` of a triangle (zero for a
+/// degenerate one).
+#[inline]
+fn unit_normal([a, b, c]: [Vec3; 3]) -> Vec3 {
+    let n = (b - a).cross(c - a);
+    if n.is_finite() {
+        n.normalize_or_zero()
+    } else {
+        // Edges so long their products overflow f32: take it in f64.
+        to_f32(to_f64(b - a).cross(to_f64(c - a)).normalize_or_zero())
+    }
+}
+
+/// The weights the ray `(o, d)` meets triangle `v`'s plane at, rounded for
+/// shading, and the `f64` point they give (see [`TriScene::view_weights`]).
+#[inline]
+fn view_weights_of(v: [Vec3; 3], o: DVec3, d: DVec3) -> (Bary, DVec3) {
+    let v = v.map(to_f64);
+    let w = plane_barycentrics(o, d, v).map_or([1.0 / 3.0; 3], |(w, _)| w);
+    let b = Bary::from_f64(w);
+    let s = w[0] + w[1] + w[2];
+    let p = (v[0] * w[0] + v[1] * w[1] + v[2] * w[2]) / s;
+    (b, p)
+}
+
 fn plane_point(v: [Vec3; 3], b: Bary) -> (Vec3, Vec3) {
     let w = b.0.map(f64::from);
     let sum = w[0] + w[1] + w[2];
@@ -572,13 +602,16 @@ fn plane_point(v: [Vec3; 3], b: Bary) -> (Vec3, Vec3) {
     let p = to_f32(p64);
     let spread = (v64[0] * w[0]).abs() + (v64[1] * w[1]).abs() + (v64[2] * w[2]).abs();
     let err = to_f64(p).abs() * f64::from(F32_EPS) + spread * (gamma64(8) / s.abs());
-    // Rounded up, so the f32 bound never falls below the f64 one.
-    let up = |x: f64| {
-        #[expect(clippy::cast_possible_truncation, reason = "rounded up just after")]
-        let r = x as f32;
-        if f64::from(r) < x { r.next_up() } else { r }
-    };
-    (p, Vec3::new(up(err.x), up(err.y), up(err.z)))
+    // Rounded up (without a branch), so the f32 bound never falls below
+    // the f64 one.
+    (
+        p,
+        Vec3::new(
+            f32_at_least(err.x),
+            f32_at_least(err.y),
+            f32_at_least(err.z),
+        ),
+    )
 }
 
 /// POV-Ray's spherical map (POVRAY.md §9.1) of a unit direction in the

@@ -1026,8 +1026,7 @@ fn shade_pass(
                 // The weights the ray tracer shades with: the f64 camera
                 // ray of this sample against the visible triangle.
                 let ray64 = cam_rays.ray(sx, sy);
-                let (b, p64) = scene.view_weights(tri, ray64.origin, ray64.dir);
-                let sp = scene.surface_at(tri, b);
+                let (sp, p64) = scene.view_surface(tri, ray64.origin, ray64.dir);
                 let ray = ray64.to_f32();
                 let depth = cam.frame_depth(p64);
                 let Some(r) = &rays else {

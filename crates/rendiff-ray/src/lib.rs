@@ -411,10 +411,7 @@ impl Tracer<'_, '_> {
     fn surface(&self, hit: &Hit, o: DVec3, d: DVec3) -> (SurfacePoint, DVec3) {
         let scene = self.scene;
         match scene.prim(hit.prim) {
-            Prim::Triangle(id) => {
-                let (b, p64) = scene.view_weights(id, o, d);
-                (scene.surface_at(id, b), p64)
-            }
+            Prim::Triangle(id) => scene.view_surface(id, o, d),
             Prim::Analytic(k) => {
                 let p64 = o + d * hit.t64;
                 (scene.analytic_surface_at(k, p64), p64)
