@@ -2,12 +2,19 @@
 //!
 //! ```text
 //! rendiff-peers summary [--repeats N]
-//! rendiff-peers embree [SCENE.toml] [--subdivide K] [--repeats N]
+//! rendiff-peers embree [SCENE.toml] [--subdivide K] [--morton] [--repeats N]
 //! rendiff-peers povray [SCENE.toml ...] [--threads 1,2] [--repeats N]
 //! rendiff-peers llvmpipe [--repeats N]
 //! rendiff-peers objload [--repeats N]
+//! rendiff-peers trees [SCENE.toml] [--subdivide K] [--repeats N]
 //! rendiff-peers profile SCENE.toml [--backend raster|ray] [--subdivide K] [--shadowless] [--build] [--repeats N]
 //! ```
+//!
+//! `trees`: the BVH built by the SAH and in Morton order over the same
+//! triangles (default: the 940 k bunny), each build timed, then the same
+//! primary rays (scanline order and 4×2 packets) and shadow rays as
+//! `embree` traced through both trees in alternation, one thread: the
+//! build time against the walk's speed, medians and minima.
 //!
 //! `profile`: one scene rendered `--repeats` times in a row on one thread
 //! (load once, render many), printing the median time: a target for
@@ -15,7 +22,8 @@
 //! against. `--subdivide K` splits every triangle K times into four and
 //! `--shadowless` makes every light shadowless, as the summary's frames
 //! of the 940 k bunny (the ray tracer then traces a BVH built once);
-//! `--build` times the BVH build alone.
+//! `--build` times the BVH build alone. `--morton` (here and with
+//! `embree`) builds our BVH in Morton order instead of by the SAH.
 //!
 //! `summary` (what `make peers` runs): every comparison below plus the
 //! build at ten million triangles, the raster and ray frames, the whole
@@ -53,7 +61,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use rayon::prelude::*;
-use rendiff::accel::{Accel, AccelOptions, ShadowRays};
+use rendiff::accel::{Accel, AccelOptions, BvhBuild, ShadowRays};
 use rendiff::color::to_srgb8;
 use rendiff::math::{Ray64, to_f32};
 use rendiff::pov::golden::{self, Variant};
@@ -105,7 +113,7 @@ fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let Some(cmd) = args.first() else {
         bail!(
-            "usage: rendiff-peers summary [--repeats N] | embree [SCENE] [--subdivide K] [--repeats N] | povray [SCENE...] [--threads 1,2] [--repeats N] | llvmpipe [--repeats N] | objload [--repeats N] | profile SCENE [--backend raster|ray] [--subdivide K] [--shadowless] [--build] [--repeats N]"
+            "usage: rendiff-peers summary [--repeats N] | trees [SCENE] [--subdivide K] [--repeats N] | embree [SCENE] [--subdivide K] [--repeats N] | povray [SCENE...] [--threads 1,2] [--repeats N] | llvmpipe [--repeats N] | objload [--repeats N] | profile SCENE [--backend raster|ray] [--subdivide K] [--shadowless] [--build] [--repeats N]"
         );
     };
     let rest = &args[1..];
@@ -117,7 +125,7 @@ fn main() -> Result<()> {
                 .cloned()
                 .unwrap_or_else(|| PathBuf::from("benches/scenes/bunny_1m.toml"));
             let k: u32 = flag(rest, "--subdivide").map_or(Ok(4), |s| s.parse())?;
-            embree_cmp(&scene, k, repeats).map(|_| ())
+            embree_cmp(&scene, k, build_flag(rest), repeats).map(|_| ())
         }
         "povray" => {
             let mut scenes = positional(rest);
@@ -131,6 +139,14 @@ fn main() -> Result<()> {
             povray_cmp(&scenes, &threads, repeats).map(|_| ())
         }
         "summary" => summary::summary(repeats),
+        "trees" => {
+            let scene = positional(rest)
+                .first()
+                .cloned()
+                .unwrap_or_else(|| PathBuf::from("benches/scenes/bunny_1m.toml"));
+            let k: u32 = flag(rest, "--subdivide").map_or(Ok(4), |s| s.parse())?;
+            trees(&scene, k, repeats).map(|_| ())
+        }
         "objload" => summary::obj_load(repeats).map(|_| ()),
         "llvmpipe" => llvmpipe::compare(repeats).map(|_| ()),
         "profile" => {
@@ -145,14 +161,15 @@ fn main() -> Result<()> {
             };
             let k: u32 = flag(rest, "--subdivide").map_or(Ok(0), |s| s.parse())?;
             let shadowless = rest.iter().any(|a| a == "--shadowless");
+            let build = build_flag(rest);
             if rest.iter().any(|a| a == "--build") {
-                profile_build(&scene, k, repeats)
+                profile_build(&scene, k, build, repeats)
             } else {
-                profile(&scene, backend, k, shadowless, repeats)
+                profile(&scene, backend, (k, build), shadowless, repeats)
             }
         }
         other => bail!(
-            "unknown command {other:?}: expected summary, embree, povray, llvmpipe, objload or profile"
+            "unknown command {other:?}: expected summary, embree, trees, povray, llvmpipe, objload or profile"
         ),
     }
 }
@@ -166,7 +183,7 @@ fn main() -> Result<()> {
 fn profile(
     scene: &Path,
     backend: Backend,
-    subdivide: u32,
+    (subdivide, build): (u32, BvhBuild),
     shadowless: bool,
     repeats: usize,
 ) -> Result<()> {
@@ -185,7 +202,15 @@ fn profile(
             }
             opts.shadows_needed = false;
         }
-        let accel = (backend == Backend::Ray).then(|| Accel::new(&t, AccelOptions::default()));
+        let accel = (backend == Backend::Ray).then(|| {
+            Accel::new(
+                &t,
+                AccelOptions {
+                    build,
+                    ..AccelOptions::default()
+                },
+            )
+        });
         let ray_opts = rendiff::ray::RayOptions {
             max_depth: job.settings.max_depth,
             shadows: !shadowless,
@@ -221,7 +246,7 @@ fn profile(
 
 /// Builds the BVH of a scene (split `subdivide` times) `repeats` times on
 /// one thread and prints the median, minimum and maximum.
-fn profile_build(scene: &Path, subdivide: u32, repeats: usize) -> Result<()> {
+fn profile_build(scene: &Path, subdivide: u32, build: BvhBuild, repeats: usize) -> Result<()> {
     let job = Prepared::load(scene, &Overrides::default())?;
     let t = job.tri.subdivided(subdivide);
     let p = pool(1)?;
@@ -229,11 +254,26 @@ fn profile_build(scene: &Path, subdivide: u32, repeats: usize) -> Result<()> {
         .map(|_| {
             p.install(|| {
                 let start = Instant::now();
-                std::hint::black_box(Accel::new(&t, AccelOptions::default()));
+                std::hint::black_box(Accel::new(
+                    &t,
+                    AccelOptions {
+                        build,
+                        ..AccelOptions::default()
+                    },
+                ));
                 start.elapsed().as_secs_f64() * 1e3
             })
         })
         .collect();
+    let stats = Accel::new(
+        &t,
+        AccelOptions {
+            build,
+            ..AccelOptions::default()
+        },
+    )
+    .stats();
+    println!("{build:?} tree: {stats:?}");
     let min = times.iter().copied().fold(f64::INFINITY, f64::min);
     let max = times.iter().copied().fold(0.0, f64::max);
     println!(
@@ -274,6 +314,8 @@ pub struct RayFigures {
     pub shadow_vs_embree: f64,
     /// Build time, ours / Embree.
     pub build: f64,
+    /// Embree's build, ms.
+    pub embree_build_ms: f64,
 }
 
 #[expect(clippy::cast_possible_truncation, reason = "Embree takes f32 rays")]
@@ -307,7 +349,119 @@ fn camera_rays(cam: &rendiff::camera::Camera) -> (Vec<Ray64>, Vec<Vec<Ray64>>) {
     (rays, blocks)
 }
 
-fn embree_cmp(scene: &Path, subdivide: u32, repeats: usize) -> Result<RayFigures> {
+/// What `trees` measured: the medians of the SAH's tree and of the Morton
+/// order's, in ms.
+pub struct TreeFigures {
+    /// Builds (SAH, Morton).
+    pub build: [f64; 2],
+    /// Primary rays in scanline order.
+    pub primary: [f64; 2],
+    /// Primary rays in 4×2 packets.
+    pub packets: [f64; 2],
+    /// Shadow rays.
+    pub shadow: [f64; 2],
+}
+
+/// The SAH and the Morton build of one scene's BVH: build times, then
+/// primary, packet and shadow rays through each tree in alternation (one
+/// thread; minima and medians of `repeats` rounds).
+fn trees(scene: &Path, subdivide: u32, repeats: usize) -> Result<TreeFigures> {
+    let job = Prepared::load(scene, &Overrides::default())?;
+    let tri = job.tri.subdivided(subdivide);
+    let (rays, blocks) = camera_rays(&tri.camera);
+    let p = pool(1)?;
+    let builds = [BvhBuild::Sah, BvhBuild::Morton];
+    let opts = |build| AccelOptions {
+        build,
+        ..AccelOptions::default()
+    };
+    let mut build_ms = [Vec::new(), Vec::new()];
+    for _ in 0..repeats.max(1) {
+        for (k, &b) in builds.iter().enumerate() {
+            build_ms[k].push(p.install(|| {
+                let t = Instant::now();
+                std::hint::black_box(Accel::new(&tri, opts(b)));
+                t.elapsed().as_secs_f64() * 1e3
+            }));
+        }
+    }
+    let accels = builds.map(|b| Accel::new(&tri, opts(b)));
+    let shadow = shadow_rays(&tri, &accels[0]);
+    println!(
+        "{}: {} triangles, {} primary rays, {} shadow rays, 1 thread",
+        scene.display(),
+        tri.len(),
+        rays.len(),
+        shadow.len()
+    );
+    // [tree][primary, packets, shadow] times.
+    let mut ms = [[vec![], vec![], vec![]], [vec![], vec![], vec![]]];
+    for _ in 0..repeats.max(1) {
+        for (k, accel) in accels.iter().enumerate() {
+            p.install(|| {
+                let t = Instant::now();
+                let hits = rays.iter().filter(|r| accel.intersect(r).is_some()).count();
+                std::hint::black_box(hits);
+                ms[k][0].push(t.elapsed().as_secs_f64() * 1e3);
+                let t = Instant::now();
+                let mut out = [None; 8];
+                let hits: usize = blocks
+                    .iter()
+                    .map(|b| {
+                        let out = &mut out[..b.len()];
+                        accel.intersect_packets(b, out);
+                        out.iter().filter(|h| h.is_some()).count()
+                    })
+                    .sum();
+                std::hint::black_box(hits);
+                ms[k][1].push(t.elapsed().as_secs_f64() * 1e3);
+                let t = Instant::now();
+                let vis = ShadowRays::new(accel);
+                let mut out = vec![rendiff::color::Rgb::WHITE; shadow.len()];
+                vis.transmittance_packets(&shadow, &mut out);
+                std::hint::black_box(out.iter().filter(|t| t.is_black()).count());
+                ms[k][2].push(t.elapsed().as_secs_f64() * 1e3);
+            });
+        }
+    }
+    let fig = |v: &Vec<f64>| {
+        let min = v.iter().copied().fold(f64::INFINITY, f64::min);
+        format!("{:.1} ms (min {min:.1})", median(v.clone()))
+    };
+    for (k, b) in builds.iter().enumerate() {
+        println!(
+            "{b:?}: build {}; primary {}; packets {}; shadow {}; {:?}",
+            fig(&build_ms[k]),
+            fig(&ms[k][0]),
+            fig(&ms[k][1]),
+            fig(&ms[k][2]),
+            accels[k].stats()
+        );
+    }
+    let med = |k: usize, i: usize| median(ms[k][i].clone());
+    Ok(TreeFigures {
+        build: [median(build_ms[0].clone()), median(build_ms[1].clone())],
+        primary: [med(0, 0), med(1, 0)],
+        packets: [med(0, 1), med(1, 1)],
+        shadow: [med(0, 2), med(1, 2)],
+    })
+}
+
+/// The BVH build the arguments ask for: Morton order with `--morton`,
+/// else the SAH.
+fn build_flag(args: &[String]) -> BvhBuild {
+    if args.iter().any(|a| a == "--morton") {
+        BvhBuild::Morton
+    } else {
+        BvhBuild::Sah
+    }
+}
+
+fn embree_cmp(scene: &Path, subdivide: u32, build: BvhBuild, repeats: usize) -> Result<RayFigures> {
+    let opts = AccelOptions {
+        build,
+        ..AccelOptions::default()
+    };
     let job = Prepared::load(scene, &Overrides::default())?;
     let tri = job.tri.subdivided(subdivide);
     let cam = &tri.camera;
@@ -333,12 +487,12 @@ fn embree_cmp(scene: &Path, subdivide: u32, repeats: usize) -> Result<RayFigures
         let p = pool(threads)?;
         let config = format!("threads={threads}");
         let ours_build = time_ms(&p, repeats, &|| {
-            std::hint::black_box(Accel::new(&tri, AccelOptions::default()));
+            std::hint::black_box(Accel::new(&tri, opts));
         });
         let embree_build = time_ms(&p, repeats, &|| {
             std::hint::black_box(embree::EmbreeScene::new(&positions, &tri.tris, &config).ok());
         });
-        let accel = Accel::new(&tri, AccelOptions::default());
+        let accel = Accel::new(&tri, opts);
         let emb = embree::EmbreeScene::new(&positions, &tri.tris, &config)?;
         let count = |f: &(dyn Fn(&Ray64) -> bool + Sync)| {
             let hits: usize = rays
@@ -445,6 +599,7 @@ fn embree_cmp(scene: &Path, subdivide: u32, repeats: usize) -> Result<RayFigures
                 shadow_mrays: mrays(shadow.len(), t_shadow),
                 shadow_vs_embree: t_emb_shadow / t_shadow,
                 build: ours_build / embree_build,
+                embree_build_ms: embree_build,
             };
             agreement(&rays, &accel, &emb);
         }

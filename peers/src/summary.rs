@@ -34,7 +34,7 @@ struct Row {
 pub fn summary(repeats: usize) -> Result<()> {
     let mut rows = Vec::new();
     let bunny = Path::new("benches/scenes/bunny_1m.toml");
-    let rays = crate::embree_cmp(bunny, 4, repeats)?;
+    let rays = crate::embree_cmp(bunny, 4, rendiff::accel::BvhBuild::Sah, repeats)?;
     rows.push(Row {
         measure: "primary rays, 940 k bunny 1080p, vs Embree rtcIntersect1 (speed ratio)",
         before: "0.65×",
@@ -62,11 +62,26 @@ pub fn summary(repeats: usize) -> Result<()> {
         now: format!("{:.2}×", rays.build),
         target: "≤ 1.0×",
     });
-    let (ours10, embree10) = build_10m(repeats.min(3))?;
+    let trees = crate::trees(bunny, 4, repeats.max(5))?;
+    let embree_build = rays.embree_build_ms;
     rows.push(Row {
-        measure: "BVH build at 10 M triangles (µs per triangle; Embree)",
+        measure: "BVH build 940 k in Morton order, ours / Embree (its walks against the SAH tree's: primary, packets, shadow)",
+        before: "—",
+        now: format!(
+            "{:.2}× ({:.0} / {embree_build:.0} ms; walks {:.2}×, {:.2}×, {:.2}× the SAH's time)",
+            trees.build[1] / embree_build,
+            trees.build[1],
+            trees.primary[1] / trees.primary[0],
+            trees.packets[1] / trees.packets[0],
+            trees.shadow[1] / trees.shadow[0],
+        ),
+        target: "≤ 1.0× at equal trace speed",
+    });
+    let (ours10, morton10, embree10) = build_10m(repeats.min(3))?;
+    rows.push(Row {
+        measure: "BVH build at 10 M triangles (µs per triangle: SAH; Morton order; Embree)",
         before: "0.5 µs",
-        now: format!("{ours10:.3} µs (Embree {embree10:.3} µs)"),
+        now: format!("{ours10:.3} µs; {morton10:.3} µs (Embree {embree10:.3} µs)"),
         target: "≤ 0.25 µs",
     });
     let (raster_ms, ray_ms) = frames(repeats)?;
@@ -126,8 +141,9 @@ pub fn summary(repeats: usize) -> Result<()> {
 }
 
 /// BVH build time per triangle at ten million triangles
-/// (`benches/scenes/ten_million.toml`), ours and Embree's, 1 thread, in µs.
-fn build_10m(repeats: usize) -> Result<(f64, f64)> {
+/// (`benches/scenes/ten_million.toml`), ours by the SAH and in Morton order
+/// and Embree's, 1 thread, in µs.
+fn build_10m(repeats: usize) -> Result<(f64, f64, f64)> {
     let job = Prepared::load(
         Path::new("benches/scenes/ten_million.toml"),
         &Overrides::default(),
@@ -137,6 +153,15 @@ fn build_10m(repeats: usize) -> Result<(f64, f64)> {
     let ours = time_ms(&p, repeats, &|| {
         std::hint::black_box(Accel::new(tri, AccelOptions::default()));
     });
+    let morton = time_ms(&p, repeats, &|| {
+        std::hint::black_box(Accel::new(
+            tri,
+            AccelOptions {
+                build: rendiff::accel::BvhBuild::Morton,
+                ..AccelOptions::default()
+            },
+        ));
+    });
     let positions: Vec<[f32; 3]> = tri.positions.iter().map(|v| v.to_array()).collect();
     let embree = time_ms(&p, repeats, &|| {
         std::hint::black_box(
@@ -145,10 +170,10 @@ fn build_10m(repeats: usize) -> Result<(f64, f64)> {
     });
     let n = tri.len() as f64;
     println!(
-        "build at {} triangles, 1 thread: ours {ours:.0} ms, Embree {embree:.0} ms",
+        "build at {} triangles, 1 thread: ours {ours:.0} ms (Morton order {morton:.0} ms), Embree {embree:.0} ms",
         tri.len()
     );
-    Ok((ours * 1e3 / n, embree * 1e3 / n))
+    Ok((ours * 1e3 / n, morton * 1e3 / n, embree * 1e3 / n))
 }
 
 /// The rasterizer's shaded frame and the ray tracer's (BVH built

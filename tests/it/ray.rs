@@ -909,6 +909,94 @@ fn a_shadow_ray_never_meets_the_triangle_it_leaves() {
     assert!(total > 50_000, "{total} shadow queries");
 }
 
+// ---- Build invariance -------------------------------------------------------
+
+/// Every bundled and hazard scene, ray traced through a BVH built by the
+/// SAH and through one built in Morton order, gives the same frame bit for
+/// bit (colour, depth, triangle id, flags): the grouping of a tree changes
+/// how fast rays walk it, never what they meet. (The rasterizer's shadow
+/// rays go through the tree its rule picks: `dense.toml`'s in Morton
+/// order, held to its regression golden.)
+#[test]
+fn every_bvh_build_renders_every_scene_bit_for_bit() {
+    use rendiff::accel::BvhBuild;
+    let mut paths = Vec::new();
+    for dir in ["scenes", "tests/data/hazards"] {
+        for e in std::fs::read_dir(crate::util::root().join(dir)).unwrap() {
+            let p = e.unwrap().path();
+            if p.extension().is_some_and(|x| x == "toml") {
+                paths.push(p);
+            }
+        }
+    }
+    paths.sort();
+    assert!(paths.len() >= 20, "the scenes are found");
+    let ov = Overrides {
+        size: Some((96, 72)),
+        ..Overrides::default()
+    };
+    for path in &paths {
+        let job = Prepared::load(path, &ov).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let frame = |build| {
+            let accel = Accel::new(
+                &job.tri,
+                AccelOptions {
+                    geometry: job.settings.geometry,
+                    bvh: true,
+                    build,
+                    ..AccelOptions::default()
+                },
+            );
+            let opts = rendiff::ray::RayOptions {
+                max_depth: if job.plan.ray_tree {
+                    job.tri.max_depth.max(1)
+                } else {
+                    1
+                },
+                shadows: job.plan.shadows,
+                gate_eps: rendiff::GATE_EPS,
+            };
+            rendiff::ray::render(&accel, &opts)
+        };
+        assert!(
+            frame(BvhBuild::Sah) == frame(BvhBuild::Morton),
+            "{}: the builds' frames differ",
+            path.display()
+        );
+    }
+}
+
+/// The rule that picks the build: Morton order below four rays per
+/// triangle, the SAH at and above it; the plan applies it to the ray
+/// tracer's primary and shadow rays, and the rasterizer to its shadow rays
+/// once it has counted the visible samples (`scenes/dense.toml`: 42 638
+/// visible samples and one light against 50 099 triangles).
+#[test]
+fn the_build_follows_the_rays_per_triangle() {
+    use rendiff::accel::BvhBuild;
+    assert_eq!(BvhBuild::for_rays(0, 1), BvhBuild::Morton);
+    assert_eq!(BvhBuild::for_rays(399, 100), BvhBuild::Morton);
+    assert_eq!(BvhBuild::for_rays(400, 100), BvhBuild::Sah);
+    assert_eq!(BvhBuild::for_rays(u64::MAX, usize::MAX), BvhBuild::Sah);
+    // 320×240 at 2×2 samples and one shadow-casting light: 614 400 rays.
+    let dense = load("dense", &Overrides::default());
+    assert_eq!(dense.plan.bvh_build, BvhBuild::Sah);
+    // The same scene at 64×48: 24 576 rays for 50 099 triangles.
+    let small = load(
+        "dense",
+        &Overrides {
+            size: Some((64, 48)),
+            ..Overrides::default()
+        },
+    );
+    assert_eq!(small.plan.bvh_build, BvhBuild::Morton);
+    assert!(
+        small.plan.to_string().contains("Morton-order BVH       on"),
+        "{}",
+        small.plan
+    );
+}
+
 // ---- Instruction-set invariance --------------------------------------------
 
 /// Every bundled and hazard scene, ray traced with the ray queries on the
@@ -944,6 +1032,7 @@ fn every_simd_path_renders_every_scene_bit_for_bit() {
                     geometry: job.settings.geometry,
                     bvh: job.plan.bvh,
                     simd,
+                    ..AccelOptions::default()
                 },
             );
             names.insert(accel.simd());

@@ -16,6 +16,7 @@ pub use bvh::{BvhHit, BvhStats};
 use rendiff_core::analytic::sphere::sphere_roots;
 use rendiff_core::color::Rgb;
 use rendiff_core::math::{DVec3, Ray64, Vec3, to_f64};
+pub use rendiff_core::options::BvhBuild;
 use rendiff_core::options::Geometry;
 use rendiff_core::shade::{Answered, ShadeContext, ShadowQuery, SurfacePoint, Visibility};
 use rendiff_core::tri_scene::{Prim, TriScene};
@@ -29,6 +30,8 @@ pub struct AccelOptions {
     pub geometry: Geometry,
     /// A BVH (`true`) or one flat leaf (`false`).
     pub bvh: bool,
+    /// How the BVH is built.
+    pub build: BvhBuild,
     /// The instruction set of the ray queries.
     pub simd: SimdPath,
 }
@@ -38,6 +41,7 @@ impl Default for AccelOptions {
         AccelOptions {
             geometry: Geometry::Mesh,
             bvh: true,
+            build: BvhBuild::Sah,
             simd: SimdPath::Auto,
         }
     }
@@ -114,7 +118,12 @@ impl<'s> Accel<'s> {
         let ids: Vec<u32> = (0..u32::try_from(scene.len()).unwrap_or(u32::MAX))
             .filter(|&t| !analytic_object[scene.tri_object[t as usize] as usize])
             .collect();
-        let mut bvh = Bvh::build(&ids, |id| scene.triangle(id), !opts.bvh);
+        let tree = match (opts.bvh, opts.build) {
+            (false, _) => bvh::Tree::Flat,
+            (true, BvhBuild::Sah) => bvh::Tree::Sah,
+            (true, BvhBuild::Morton) => bvh::Tree::Morton,
+        };
+        let mut bvh = Bvh::build(&ids, |id| scene.triangle(id), tree);
         bvh.set_simd(opts.simd);
         let class_of = |object: u32, material: u16| {
             if scene.objects[object as usize].no_shadow {

@@ -210,7 +210,8 @@ pub(crate) struct TriPack {
 }
 
 impl TriPack {
-    /// An empty pack (no lanes).
+    /// An empty pack (no lanes; the tests fill one lane by lane).
+    #[cfg(test)]
     pub(crate) const EMPTY: TriPack = TriPack {
         v: [[Vec4::ZERO; 3]; 3],
         lanes: 0,
@@ -226,6 +227,7 @@ impl TriPack {
     }
 
     /// Puts a triangle in `lane`.
+    #[cfg(test)]
     pub(crate) fn set(&mut self, lane: usize, tri: [Vec3; 3]) {
         for (corner, p) in tri.iter().enumerate() {
             self.v[corner][0][lane] = p.x;

@@ -34,7 +34,7 @@ mod shadow_map;
 use rayon::prelude::*;
 
 use clip::{HVert, clip_polygon, planes};
-use rendiff_accel::{Accel, AccelOptions, ShadowBatch, ShadowRays};
+use rendiff_accel::{Accel, AccelOptions, BvhBuild, ShadowBatch, ShadowRays};
 use rendiff_core::camera::{Projection, SampleRays};
 use rendiff_core::coverage::{FillRule, SampleGrid, SnappedTri, Sub8, bbox_samples, doubled_area};
 use rendiff_core::frame::{BACKGROUND, Frame, Sample};
@@ -993,9 +993,10 @@ fn shade_pass(
     let ctx = scene.shade_context(opts.gate_eps, opts.shadows_needed);
     // Shadows: nothing when the plan says no shadow can fall; else a BVH
     // for shadow rays (one `ShadowRays` per row, so its counter is never
-    // shared) or the shadow maps.
+    // shared), built by the rule of `BvhBuild::for_rays` for at most one
+    // ray per visible sample and shadow-casting light; or the shadow maps.
     let accel = (opts.shadows_needed && opts.shadows == ShadowMode::Rays)
-        .then(|| Accel::new(scene, AccelOptions::default()));
+        .then(|| Accel::new(scene, shadow_accel_options(scene, &vis.id)));
     let map = match (opts.shadows_needed, opts.shadows) {
         (true, ShadowMode::Map(res)) => Some(shadow_map::ShadowMaps::new(scene, res)),
         _ => None,
@@ -1049,6 +1050,20 @@ fn shade_pass(
     frame.resolve();
     let maps = map.as_ref().map_or(0, shadow_map::ShadowMaps::count);
     (frame, shadow_rays, maps)
+}
+
+/// The options of a shadow BVH for a frame whose samples show the
+/// triangles `ids`: built as [`BvhBuild::for_rays`] decides for one shadow
+/// ray per visible sample and shadow-casting light (an upper bound: only
+/// lit sides cast them).
+pub(crate) fn shadow_accel_options(scene: &TriScene, ids: &[u32]) -> AccelOptions {
+    let visible = ids.iter().filter(|&&id| id != BACKGROUND).count();
+    let lights = scene.lights.iter().filter(|l| !l.shadowless).count();
+    let rays = u64::try_from(visible.saturating_mul(lights)).unwrap_or(u64::MAX);
+    AccelOptions {
+        build: BvhBuild::for_rays(rays, scene.len()),
+        ..AccelOptions::default()
+    }
 }
 
 /// Visible samples of a row waiting to be shaded together (see

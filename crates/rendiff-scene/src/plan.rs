@@ -8,7 +8,7 @@
 use std::fmt;
 
 use rendiff_core::math::{DVec3, to_f64};
-use rendiff_core::options::BvhMode;
+use rendiff_core::options::{BvhBuild, BvhMode};
 use rendiff_core::tri_scene::{NO_INDEX, TriScene};
 
 /// Scenes with at most this many triangles use a flat loop instead of a
@@ -42,6 +42,10 @@ pub struct Plan {
     pub ray_tree: bool,
     /// Use a BVH (else a flat loop).
     pub bvh: bool,
+    /// How the ray tracer's BVH is built (the rasterizer decides its
+    /// shadow BVH's by the same rule once it has counted the visible
+    /// samples).
+    pub bvh_build: BvhBuild,
     /// Per object: can be culled from primary visibility (outside the frustum).
     pub frustum_cull: Vec<bool>,
     /// Per object: back faces can be culled by the rasterizer's primary visibility.
@@ -76,6 +80,7 @@ impl Plan {
             shadows: true,
             ray_tree: true,
             bvh: bvh != BvhMode::Off,
+            bvh_build: BvhBuild::Sah,
             frustum_cull: vec![false; n],
             backface_cull: vec![false; n],
             uv: vec![true; scene.materials.len()],
@@ -95,12 +100,14 @@ impl Plan {
         let (uv, uv_decision) = decide_uv(scene);
         let smooth_decision = decide_smooth_normals(scene);
         let (bvh, bvh_decision) = decide_bvh(scene, bvh_mode);
+        let (bvh_build, build_decision) = decide_bvh_build(scene, bvh, shadows);
         let (frustum_cull, frustum_decision) = decide_frustum_cull(scene);
         let (backface_cull, backface_decision) = decide_backface_cull(scene);
         Plan {
             shadows,
             ray_tree,
             bvh,
+            bvh_build,
             frustum_cull,
             backface_cull,
             uv,
@@ -110,6 +117,7 @@ impl Plan {
                 uv_decision,
                 smooth_decision,
                 bvh_decision,
+                build_decision,
                 frustum_decision,
                 backface_decision,
             ],
@@ -281,6 +289,51 @@ fn decide_bvh(scene: &TriScene, bvh_mode: BvhMode) -> (bool, Decision) {
         },
     };
     (bvh, decision)
+}
+
+/// The ray tracer's BVH build: in Morton order where its primary rays and
+/// one shadow ray per sample and shadow-casting light (the rays every
+/// frame casts; the ray tree's come on top) are fewer than
+/// [`BvhBuild::MORTON_BELOW_RAYS_PER_TRIANGLE`] per triangle, else by the
+/// SAH.
+fn decide_bvh_build(scene: &TriScene, bvh: bool, shadows: bool) -> (BvhBuild, Decision) {
+    let cam = &scene.camera;
+    let samples = u64::from(cam.sample_width()) * u64::from(cam.sample_height());
+    let lights = if shadows {
+        scene.lights.iter().filter(|l| !l.shadowless).count()
+    } else {
+        0
+    };
+    let rays = samples.saturating_mul(1 + u64::try_from(lights).unwrap_or(u64::MAX));
+    let build = if bvh {
+        BvhBuild::for_rays(rays, scene.len())
+    } else {
+        BvhBuild::Sah
+    };
+    let per = BvhBuild::MORTON_BELOW_RAYS_PER_TRIANGLE;
+    let decision = Decision {
+        what: "Morton-order BVH",
+        on: build == BvhBuild::Morton,
+        why: if bvh {
+            format!(
+                "{rays} primary and shadow rays for {} triangles ({} {per} per triangle: {})",
+                scene.len(),
+                if build == BvhBuild::Morton {
+                    "below"
+                } else {
+                    "at or above"
+                },
+                if build == BvhBuild::Morton {
+                    "the faster build"
+                } else {
+                    "the SAH's faster walk"
+                }
+            )
+        } else {
+            "no BVH".into()
+        },
+    };
+    (build, decision)
 }
 
 /// Frustum culling: per object, whether it lies entirely outside the view

@@ -400,6 +400,7 @@ impl Prepared {
                     AccelOptions {
                         geometry: self.settings.geometry,
                         bvh: self.plan.bvh,
+                        build: self.plan.bvh_build,
                         ..AccelOptions::default()
                     },
                 );
