@@ -226,6 +226,7 @@ pub fn encode_png(
     let p = Path::new("<memory>");
     {
         let mut enc = png::Encoder::new(&mut out, width, height);
+        enc.set_compression(PIXEL_COMPRESSION);
         enc.set_color(png::ColorType::Rgb);
         let data: Vec<u8> = match encoding {
             PngEncoding::Srgb8 => {
@@ -251,6 +252,13 @@ pub fn encode_png(
     }
     Ok(out)
 }
+
+/// The compression of the images rendiff renders and draws (frames,
+/// references, maps): `fdeflate`'s fast mode. The default (`Balanced`,
+/// zlib level 6) spent 32 M instructions deflating a 320×240 frame, 6 %
+/// of a whole `rendiff render` of `scenes/dense.toml`, for files
+/// 10–20 % smaller (`scenes/dense.toml` 22 435 against 24 635 bytes).
+const PIXEL_COMPRESSION: png::Compression = png::Compression::Fast;
 
 /// Writes a colour image.
 ///
@@ -331,6 +339,7 @@ pub fn write_png_rgba8(
     let mut out = Vec::new();
     {
         let mut enc = png::Encoder::new(&mut out, width, height);
+        enc.set_compression(PIXEL_COMPRESSION);
         enc.set_color(png::ColorType::Rgba);
         enc.set_depth(png::BitDepth::Eight);
         let mut w = enc.write_header().map_err(|e| png_err(path, e))?;
