@@ -130,8 +130,13 @@ fn mesh_err(path: &Path, line: usize, message: impl Into<String>) -> LoadError {
     }
 }
 
-/// A number of the file, or what is wrong with it.
+/// A number of the file, or what is wrong with it: `str::parse::<f32>`
+/// (correctly rounded) and its checks, with a fast path for the plain
+/// decimals meshes are written in ([`plain_decimal`]).
 pub(super) fn parse_f32(tok: &str) -> Result<f32, String> {
+    if let Some(v) = plain_decimal(tok) {
+        return Ok(v);
+    }
     match tok.parse::<f32>() {
         Ok(v) if v.is_finite() => Ok(v),
         parsed => match tok.parse::<f64>() {
@@ -145,6 +150,93 @@ pub(super) fn parse_f32(tok: &str) -> Result<f32, String> {
             Err(_) => Err(format!("`{}` is not a number", shown(tok))),
         },
     }
+}
+
+/// `tok` as `str::parse::<f32>` reads it, where `tok` is an optional
+/// sign, digits with at most one `.` among them (at least one digit, at
+/// most nineteen), whose value as an integer is below 2⁵³, and at most
+/// twenty-two after the point; `None` for anything else (exponents,
+/// longer numbers, words), which std reads instead.
+///
+/// Why it is exact (Clinger's fast path, then one more rounding): the
+/// digits as an integer `w < 2⁵³` and `10^k` (k ≤ 22) are exact
+/// in `f64`, so `d = w / 10^k` is the correctly rounded `f64` of the
+/// decimal `x`. Rounding `d` to `f32` gives the correctly rounded `f32` of
+/// `x` unless `d` is exactly halfway between two `f32`s: a halfway point
+/// `m` is an `f64`, and were `x` and `d` on opposite sides of it, `m`
+/// would be nearer to `x` than `d` is. That one case, and results outside
+/// the normal `f32` range, go to std. A test compares the two on a
+/// million tokens.
+fn plain_decimal(tok: &str) -> Option<f32> {
+    const POW10: [f64; 23] = [
+        1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16,
+        1e17, 1e18, 1e19, 1e20, 1e21, 1e22,
+    ];
+    let b = tok.as_bytes();
+    let (neg, digits) = match b.first()? {
+        b'-' => (true, &b[1..]),
+        b'+' => (false, &b[1..]),
+        _ => (false, b),
+    };
+    // Digits (at most 19: no overflow), and where the point stood.
+    let (mut w, mut count, mut point) = (0u64, 0usize, None);
+    for &c in digits {
+        if c.is_ascii_digit() {
+            count += 1;
+            if count > 19 {
+                return None;
+            }
+            w = w * 10 + u64::from(c - b'0');
+        } else if c == b'.' && point.is_none() {
+            point = Some(count);
+        } else {
+            return None;
+        }
+    }
+    let frac = point.map_or(0, |p| count - p);
+    if count == 0 || frac >= POW10.len() || w >= 1 << 53 {
+        return None;
+    }
+    #[expect(clippy::cast_precision_loss, reason = "w < 2^53 is exact in f64")]
+    let d = w as f64 / POW10[frac];
+    if d == 0.0 {
+        return Some(if neg { -0.0 } else { 0.0 });
+    }
+    // Halfway between two normal f32s: the 29 bits below an f32's
+    // mantissa are exactly 1000…0.
+    let halfway = d.to_bits() & 0x1FFF_FFFF == 0x1000_0000;
+    if halfway || d < f64::from(f32::MIN_POSITIVE) || d > f64::from(f32::MAX) {
+        return None;
+    }
+    #[expect(
+        clippy::cast_possible_truncation,
+        reason = "the rounding to f32 that the comment above shows correct"
+    )]
+    let v = d as f32;
+    Some(if neg { -v } else { v })
+}
+
+/// `s` as `str::parse::<i64>` reads it where `s` is an optional sign and
+/// one to eighteen ASCII digits (no overflow possible); `None` otherwise
+/// (std then reads it, or says what is wrong).
+fn plain_integer(s: &str) -> Option<i64> {
+    let b = s.as_bytes();
+    let (neg, digits) = match b.first()? {
+        b'-' => (true, &b[1..]),
+        b'+' => (false, &b[1..]),
+        _ => (false, b),
+    };
+    if digits.is_empty() || digits.len() > 18 {
+        return None;
+    }
+    let mut v = 0i64;
+    for &c in digits {
+        if !c.is_ascii_digit() {
+            return None;
+        }
+        v = v * 10 + i64::from(c - b'0');
+    }
+    Some(if neg { -v } else { v })
 }
 
 /// A token as shown in a message: [`rendiff_core::escape::excerpt`].
@@ -176,21 +268,45 @@ pub(super) fn lines(text: &str) -> impl Iterator<Item = &str> {
     })
 }
 
+/// [`BYTE_CLASS`]: a byte of a word.
+const WORD: u8 = 0;
+/// [`BYTE_CLASS`]: an ASCII character `char::is_whitespace` accepts.
+const SPACE: u8 = 1;
+/// [`BYTE_CLASS`]: `#` (a comment) or a byte of a non-ASCII character.
+const STOP: u8 = 2;
+
+/// The class of every byte, for [`tokenize`]: one load a byte instead of
+/// seven comparisons.
+const BYTE_CLASS: [u8; 256] = {
+    let mut t = [WORD; 256];
+    let mut b = 0u8;
+    loop {
+        t[b as usize] = match b {
+            b' ' | b'\t' | b'\n' | 0x0B | 0x0C | b'\r' => SPACE,
+            b'#' | 0x80..=0xFF => STOP,
+            _ => WORD,
+        };
+        if b == u8::MAX {
+            break;
+        }
+        b += 1;
+    }
+    t
+};
+
 /// Splits a line into `out` at white space (`char::is_whitespace`), up to
 /// a `#` (a comment starts anywhere), with one pass over the bytes for
 /// ASCII lines.
 pub(super) fn tokenize<'a>(line: &'a str, out: &mut Vec<&'a str>) {
     out.clear();
-    // The ASCII characters `char::is_whitespace` accepts.
-    let space = |b: u8| matches!(b, b' ' | b'\t' | b'\n' | 0x0B | 0x0C | b'\r');
     let bytes = line.as_bytes();
     let mut i = 0;
     while i < bytes.len() {
-        while i < bytes.len() && space(bytes[i]) {
+        while i < bytes.len() && BYTE_CLASS[usize::from(bytes[i])] == SPACE {
             i += 1;
         }
         let start = i;
-        while i < bytes.len() && !space(bytes[i]) && bytes[i] != b'#' && bytes[i].is_ascii() {
+        while i < bytes.len() && BYTE_CLASS[usize::from(bytes[i])] == WORD {
             i += 1;
         }
         if i < bytes.len() && !bytes[i].is_ascii() {
@@ -551,16 +667,18 @@ impl Reader<'_> {
             }
             let idx = |s: &str, kind: usize| -> Result<usize, LoadError> {
                 let count = counts[kind];
-                let i: i64 = s.parse().map_err(|_| {
-                    self.err(
-                        line,
-                        format!(
-                            "`{}` in corner `{}` is not an integer index",
-                            shown(s),
-                            shown(corner)
-                        ),
-                    )
-                })?;
+                let i: i64 = plain_integer(s)
+                    .map_or_else(|| s.parse(), Ok)
+                    .map_err(|_| {
+                        self.err(
+                            line,
+                            format!(
+                                "`{}` in corner `{}` is not an integer index",
+                                shown(s),
+                                shown(corner)
+                            ),
+                        )
+                    })?;
                 let back = usize::try_from(i.unsigned_abs()).unwrap_or(usize::MAX);
                 match i.signum() {
                     1 if back <= count => Ok(back - 1),
@@ -1007,6 +1125,90 @@ mod tests {
 
     /// The one-pass tokenizer splits every line as "cut at the first `#`,
     /// then `split_whitespace`" does, ASCII or not.
+    /// The fast paths read what std reads, bit for bit, or leave the
+    /// token to it: a million tokens of signs, digits and points (and
+    /// f32 values printed at every precision), and the odd forms.
+    #[test]
+    fn plain_numbers_read_as_std_reads_them() {
+        let mut z = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = || {
+            z ^= z << 13;
+            z ^= z >> 7;
+            z ^= z << 17;
+            z
+        };
+        let alphabet = b"0123456789.-+e";
+        let mut fast = 0;
+        for k in 0..1_000_000u32 {
+            let tok = if k % 2 == 0 {
+                let len = 1 + (next() % 12) as usize;
+                (0..len)
+                    .map(|_| char::from(alphabet[(next() % 13) as usize]))
+                    .collect::<String>()
+            } else if k % 4 == 1 {
+                // As `{}` prints an f32: the shortest digits that read back.
+                let v = f32::from_bits((next() >> 32) as u32 & 0x4FFF_FFFF);
+                format!("{v}")
+            } else {
+                let v = f32::from_bits((next() >> 32) as u32 & 0x4FFF_FFFF);
+                let sign = if next() % 2 == 0 { "-" } else { "" };
+                format!("{sign}{:.*}", (next() % 23) as usize, v.abs())
+            };
+            if let Some(v) = plain_decimal(&tok) {
+                fast += 1;
+                let want: f32 = tok.parse().expect("a plain decimal is a number");
+                assert_eq!(v.to_bits(), want.to_bits(), "{tok}");
+            }
+            if let Some(i) = plain_integer(&tok) {
+                assert_eq!(Ok(i), tok.parse::<i64>(), "{tok}");
+            }
+        }
+        assert!(fast > 200_000, "{fast} tokens took the fast path");
+        for tok in [
+            "", "-", "+", ".", "-.", "1.2.3", "1e5", "nan", "inf", "0x10", " 1", "1 ",
+        ] {
+            assert_eq!(plain_decimal(tok), None, "{tok:?}");
+        }
+        for tok in [
+            "-0",
+            "-0.0",
+            "+.5",
+            "5.",
+            "0.0000000001",
+            "9999999",
+            "0009999999",
+            "0.031708304",
+        ] {
+            let want: f32 = tok.parse().unwrap();
+            assert_eq!(
+                plain_decimal(tok).map(f32::to_bits),
+                Some(want.to_bits()),
+                "{tok}"
+            );
+        }
+        for tok in [
+            "12345678901234567",
+            "0.00000000000000000000001",
+            "1e-50",
+            "340282350000000000000000000000000000000",
+        ] {
+            assert_eq!(
+                plain_decimal(tok),
+                None,
+                "{tok}: more than the fast path holds"
+            );
+        }
+        // Halfway between two f32s (2²⁴ + 1 lies between 2²⁴ and 2²⁴ + 2,
+        // exactly an f64): std rounds to even, the fast path leaves it.
+        assert_eq!(plain_decimal("16777217"), None);
+        assert_eq!(plain_decimal("16777219.0"), None);
+        assert_eq!(plain_decimal("16777218"), Some(16_777_218.0));
+        assert_eq!("16777217".parse::<f32>(), Ok(16_777_216.0));
+        assert_eq!(plain_integer("-9223372036854775808"), None);
+        assert_eq!(plain_integer("+12"), Some(12));
+        assert_eq!(plain_integer("1_0"), None);
+    }
+
     #[test]
     fn tokenizer_matches_cut_then_split() {
         let lines = [
