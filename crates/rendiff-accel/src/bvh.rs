@@ -541,9 +541,12 @@ fn build_morton(prims: &mut [PrimRef], cbounds: Box4) -> BNode {
         .iter()
         .enumerate()
         .map(|(k, p)| {
-            let [x, y, z] = bins_of(p.centroid2(), cbounds.lo, scale, n_cells);
-            #[expect(clippy::cast_possible_truncation, reason = "bins are below 1024")]
-            let code = (spread3(x as u32) << 2) | (spread3(y as u32) << 1) | spread3(z as u32);
+            // (Clamped again: a centroid whose doubled sum overflowed is a
+            // NaN or an infinity here, and any cell is as right for it,
+            // since the boxes, not the codes, bound the tree.)
+            let cell = |b: usize| u32::try_from(b.min(n_cells - 1)).unwrap_or(0);
+            let [x, y, z] = bins_of(p.centroid2(), cbounds.lo, scale, n_cells).map(cell);
+            let code = (spread3(x) << 2) | (spread3(y) << 1) | spread3(z);
             (u64::from(code) << 32) | k as u64
         })
         .collect();
@@ -1916,6 +1919,12 @@ mod tests {
             let morton = build_tree(&tris, Tree::Morton);
             check_structure(&morton, &tris);
             assert_eq!(morton.stats().triangles, n);
+            // Near the top of the f32 range, where a doubled centroid
+            // overflows, beside tiny triangles.
+            let mut wide: Vec<[Vec3; 3]> = tris.iter().map(|t| t.map(|v| v * 3e38)).collect();
+            wide.extend(tris.iter().take(7).map(|t| t.map(|v| v * 1e-30)));
+            check_structure(&build_tree(&wide, Tree::Morton), &wide);
+            check_structure(&build_tree(&wide, Tree::Sah), &wide);
             let flat = build(&tris, true);
             assert_eq!(flat.stats().nodes, 0, "the flat loop is one leaf");
         }
