@@ -514,7 +514,7 @@ fn radix_sort_codes(keys: &mut Vec<u64>) {
 /// the middle where they are equal; ranges of four or fewer are leaves.
 /// The boxes are the union of what they hold, so the tree is as exact as
 /// the SAH's: only the grouping, and so the speed of a walk, differ.
-fn build_morton(prims: &mut [PrimRef], cbounds: Box4) -> BNode {
+fn build_morton(prims: &[PrimRef], cbounds: Box4) -> (BNode, Vec<u64>) {
     let extent = cbounds.hi - cbounds.lo;
     #[expect(clippy::cast_precision_loss, reason = "1024 is exact")]
     let cells = (1u32 << MORTON_BITS) as f32;
@@ -551,40 +551,55 @@ fn build_morton(prims: &mut [PrimRef], cbounds: Box4) -> BNode {
         })
         .collect();
     radix_sort_codes(&mut keys);
-    let sorted: Vec<PrimRef> = keys
-        .iter()
-        .map(|&k| prims[(k & 0xFFFF_FFFF) as usize])
-        .collect();
-    prims.copy_from_slice(&sorted);
-    let codes: Vec<u32> = keys.iter().map(|&k| (k >> 32) as u32).collect();
-    morton_range(prims, &codes, 0)
+    // The primitives stay where they are: the sorted keys carry their
+    // indices, and only the leaves read their boxes.
+    let tree = morton_range(prims, &keys, 0);
+    (tree, keys)
+}
+
+/// The primitive index of a Morton key (its lower half).
+#[inline]
+fn key_index(k: u64) -> usize {
+    (k & 0xFFFF_FFFF) as usize
+}
+
+/// The bounds of the primitives of a run of Morton keys.
+fn keys_bounds(prims: &[PrimRef], keys: &[u64]) -> Box4 {
+    let mut b = Box4::EMPTY;
+    for &k in keys {
+        let p = &prims[key_index(k)];
+        b.grow(p.lo, p.hi);
+    }
+    b
 }
 
 /// The subtree of a Morton-sorted range (see [`build_morton`]). A range
 /// of up to [`MAX_LEAF`] is a leaf where the SAH says so: its packs cost
 /// no more than a node visit plus its two halves' packs weighted by
 /// their areas.
-fn morton_range(prims: &[PrimRef], codes: &[u32], offset: usize) -> BNode {
-    let n = prims.len();
+fn morton_range(prims: &[PrimRef], keys: &[u64], offset: usize) -> BNode {
+    let n = keys.len();
     let leaf = || BNode::Leaf {
-        bounds: bounds_of(prims).0.aabb(),
+        bounds: keys_bounds(prims, keys).aabb(),
         start: offset,
         count: n,
     };
     if n <= 4 {
         return leaf();
     }
-    let (first, last) = (codes[0], codes[n - 1]);
+    // The codes are the keys' upper halves: the first bit in which the
+    // range's first and last codes differ is the first in which the keys
+    // differ above bit 32.
+    let (first, last) = (keys[0] >> 32, keys[n - 1] >> 32);
     let mid = if first == last {
         n / 2
     } else {
-        let bit = 1u32 << (31 - (first ^ last).leading_zeros());
-        codes.partition_point(|c| c & bit == 0)
+        let bit = 1u64 << (63 - (first ^ last).leading_zeros() + 32);
+        keys.partition_point(|k| k & bit == 0)
     };
-    let (lp, rp) = prims.split_at(mid);
-    let (lc, rc) = codes.split_at(mid);
+    let (lk, rk) = keys.split_at(mid);
     if n <= MAX_LEAF {
-        let (lb, rb) = (bounds_of(lp).0, bounds_of(rp).0);
+        let (lb, rb) = (keys_bounds(prims, lk), keys_bounds(prims, rk));
         let mut all = lb;
         all.grow(rb.lo, rb.hi);
         let to_u32 = |k: usize| u32::try_from(k).unwrap_or(u32::MAX);
@@ -598,13 +613,13 @@ fn morton_range(prims: &[PrimRef], codes: &[u32], offset: usize) -> BNode {
     }
     let (l, r) = if n > PARALLEL_THRESHOLD {
         rayon::join(
-            || morton_range(lp, lc, offset),
-            || morton_range(rp, rc, offset + mid),
+            || morton_range(prims, lk, offset),
+            || morton_range(prims, rk, offset + mid),
         )
     } else {
         (
-            morton_range(lp, lc, offset),
-            morton_range(rp, rc, offset + mid),
+            morton_range(prims, lk, offset),
+            morton_range(prims, rk, offset + mid),
         )
     };
     BNode::Inner {
@@ -635,6 +650,9 @@ impl Bvh {
             bvh.root = EMPTY;
             return bvh;
         }
+        // The triangle ids in leaf order: the primitives' own order after
+        // the SAH's partitions, the sorted keys' for Morton order.
+        let mut morton_keys = None;
         let tree = match tree {
             Tree::Flat => {
                 let mut b = Box4::EMPTY;
@@ -653,14 +671,21 @@ impl Bvh {
             }
             Tree::Morton => {
                 let (_, cbounds) = bounds_of(&prims);
-                build_morton(&mut prims, cbounds)
+                let (tree, keys) = build_morton(&prims, cbounds);
+                morton_keys = Some(keys);
+                tree
             }
         };
         bvh.bounds = tree.bounds();
         let (c, r) = bvh.bounds.bounding_sphere();
         bvh.sphere = (to_f64(c), f64::from(r) * (1.0 + 1e-6));
         bvh.triangles = ids.len();
-        let order: Vec<u32> = prims.iter().map(|p| ids[p.index() as usize]).collect();
+        let order: Vec<u32> = match &morton_keys {
+            Some(keys) => keys.iter().map(|&k| ids[key_index(k)]).collect(),
+            None => prims.iter().map(|p| ids[p.index() as usize]).collect(),
+        };
+        drop(morton_keys);
+        drop(prims);
         let leaves = Leaves {
             order: &order,
             tri: &tri,
