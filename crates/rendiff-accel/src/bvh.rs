@@ -966,7 +966,7 @@ impl Bvh {
     #[inline(always)]
     fn leaf_hits(
         &self,
-        pre: &mut RayPrecomp,
+        (pre, shear): (&RayPrecomp, &mut Option<[f64; 3]>),
         first: usize,
         (t_min, skip): (f64, u32),
         t_max: &mut f64,
@@ -983,7 +983,8 @@ impl Bvh {
                 if id == skip {
                     continue;
                 }
-                if let Some(h) = intersect(pre, &pack.triangle(lane), t_min, *t_max)
+                let s = *shear.get_or_insert_with(|| pre.shear64());
+                if let Some(h) = intersect(pre, s, &pack.triangle(lane), t_min, *t_max)
                     && hit(id, h, t_max)
                 {
                     return true;
@@ -1279,7 +1280,7 @@ impl Bvh {
         }
         let ray_of = |i: usize| &rays[i.min(n - 1)];
         let (walks, slabs, mut t_prune) = self.packet_rays(rays, n);
-        let mut pres: [Option<RayPrecomp>; PACKET] = [None; PACKET];
+        let mut pres: [Option<Precomp>; PACKET] = [None; PACKET];
         // Entries: (child, the mask of its rays).
         let mut stack = Stack::<(u32, u32)>::default();
         let stack = stack.slice(self.stack_need());
@@ -1319,13 +1320,18 @@ impl Bvh {
                     let r = m.trailing_zeros() as usize;
                     m &= m - 1;
                     let ray = ray_of(r);
-                    let pre = pres[r].get_or_insert_with(|| RayPrecomp::of(ray, &walks[r]));
+                    let (pre, shear) =
+                        pres[r].get_or_insert_with(|| (RayPrecomp::of(ray, &walks[r]), None));
                     let mut t_max = ray.t_max;
                     let first = (node & !LEAF) as usize;
                     let skip = skips[r.min(n - 1)];
-                    if self.leaf_hits(pre, first, (ray.t_min, skip), &mut t_max, |id, h, _| {
-                        accept(r, id, h)
-                    }) {
+                    if self.leaf_hits(
+                        (pre, shear),
+                        first,
+                        (ray.t_min, skip),
+                        &mut t_max,
+                        |id, h, _| accept(r, id, h),
+                    ) {
                         alive &= !(1 << r);
                     }
                 }
@@ -1410,13 +1416,17 @@ trait Leaf {
     fn visit(&mut self, first: usize, t_max: &mut f32) -> bool;
 }
 
+/// A ray's triangle-test constants, formed at its first leaf, and its
+/// `f64` shear, formed by its first `f64` test ([`RayPrecomp`]).
+type Precomp = (RayPrecomp, Option<[f64; 3]>);
+
 /// The leaf test of a closest-hit query: the best hit so far.
 struct ClosestLeaf<'a> {
     bvh: &'a Bvh,
     ray: &'a Ray64,
     walk: &'a WalkRay,
     /// The triangle test's constants, formed at the first leaf.
-    pre: Option<RayPrecomp>,
+    pre: Option<Precomp>,
     best: Option<BvhHit>,
     best_t: f64,
 }
@@ -1425,10 +1435,12 @@ impl Leaf for ClosestLeaf<'_> {
     #[inline(always)]
     fn visit(&mut self, first: usize, t_prune: &mut f32) -> bool {
         let (ray, walk) = (self.ray, self.walk);
-        let pre = self.pre.get_or_insert_with(|| RayPrecomp::of(ray, walk));
+        let (pre, shear) = self
+            .pre
+            .get_or_insert_with(|| (RayPrecomp::of(ray, walk), None));
         let best = &mut self.best;
         self.bvh.leaf_hits(
-            pre,
+            (pre, shear),
             first,
             (ray.t_min, NO_SKIP),
             &mut self.best_t,
@@ -1449,7 +1461,7 @@ struct EachLeaf<'a, F> {
     ray: &'a Ray64,
     walk: &'a WalkRay,
     /// The triangle test's constants, formed at the first leaf.
-    pre: Option<RayPrecomp>,
+    pre: Option<Precomp>,
     t_max: f64,
     /// The triangle not tested ([`NO_SKIP`]: none).
     skip: u32,
@@ -1460,10 +1472,12 @@ impl<F: FnMut(u32, TriHit) -> bool> Leaf for EachLeaf<'_, F> {
     #[inline(always)]
     fn visit(&mut self, first: usize, _: &mut f32) -> bool {
         let (ray, walk) = (self.ray, self.walk);
-        let pre = self.pre.get_or_insert_with(|| RayPrecomp::of(ray, walk));
+        let (pre, shear) = self
+            .pre
+            .get_or_insert_with(|| (RayPrecomp::of(ray, walk), None));
         let visit = &mut self.visit;
         self.bvh.leaf_hits(
-            pre,
+            (pre, shear),
             first,
             (ray.t_min, self.skip),
             &mut self.t_max,
@@ -1832,11 +1846,11 @@ mod tests {
 
     /// The closest hit by testing every triangle (ties to the lower id).
     fn linear(tris: &[[Vec3; 3]], ray: &Ray64, reach: f64) -> Option<(u32, f64)> {
-        let mut pre = RayPrecomp::new(ray, reach);
+        let pre = RayPrecomp::new(ray, reach);
         let (t_min, t_max) = (ray.t_min, ray.t_max);
         let mut best: Option<(u32, f64)> = None;
         for (id, v) in tris.iter().enumerate() {
-            if let Some(h) = intersect(&mut pre, v, t_min, t_max) {
+            if let Some(h) = intersect(&pre, pre.shear64(), v, t_min, t_max) {
                 let id = u32::try_from(id).unwrap();
                 if best.is_none_or(|(_, t)| h.t64 < t) {
                     best = Some((id, h.t64));
@@ -2072,10 +2086,12 @@ mod tests {
                 });
                 all_morton.sort_unstable();
                 prop_assert_eq!(&all_morton, &all);
-                let mut pre = RayPrecomp::new(&ray, bvh.reach(&ray));
+                let pre = RayPrecomp::new(&ray, bvh.reach(&ray));
                 let (t_min, t_max) = (ray.t_min, ray.t_max);
                 let every: Vec<u32> = (0..u32::try_from(n).unwrap())
-                    .filter(|&id| intersect(&mut pre, &tris[id as usize], t_min, t_max).is_some())
+                    .filter(|&id| {
+                        intersect(&pre, pre.shear64(), &tris[id as usize], t_min, t_max).is_some()
+                    })
                     .collect();
                 prop_assert_eq!(all, every);
             }

@@ -332,6 +332,16 @@ impl<'s> Accel<'s> {
         }
     }
 
+    /// Whether a shadow query leaves the triangle it starts on untested
+    /// (its origin strictly on one side of that triangle's plane, its
+    /// direction strictly away from it: the exact test could only reject
+    /// the triangle). Exposed for the tests that hold it to that.
+    #[must_use]
+    pub fn skips_its_own_triangle(&self, q: &ShadowQuery) -> bool {
+        let ray = shadow_ray(self.scene, q).0;
+        leaves_behind(self.scene, q, &ray, &mut None) != bvh::NO_SKIP
+    }
+
     /// The `f64` segment a shadow query is traced on: to a point light,
     /// from the query's origin to the light itself; to a parallel light,
     /// the query's ray widened.
@@ -440,10 +450,11 @@ impl<'a, 's> ShadowRays<'a, 's> {
         let mut lights = [None; bvh::PACKET];
         let mut skips = [bvh::NO_SKIP; bvh::PACKET];
         let mut blocked = [false; bvh::PACKET];
+        let mut plane = None;
         for (qs, os) in queries.chunks(bvh::PACKET).zip(out.chunks_mut(bvh::PACKET)) {
             for (k, q) in qs.iter().enumerate() {
                 (rays[k], lights[k]) = shadow_ray(scene, q);
-                skips[k] = q.leaves;
+                skips[k] = leaves_behind(scene, q, &rays[k], &mut plane);
             }
             let m = qs.len();
             a.bvh.any_packet(
@@ -611,18 +622,84 @@ fn shadow_ray(scene: &TriScene, q: &ShadowQuery) -> (Ray64, Option<DVec3>) {
 /// component of `n` is within `γ₃(|e1_j e2_k| + |e1_k e2_j|)` and the dot
 /// product adds `γ₃` of `Σ|n_i Δ_i|`; twice the sum of those is the test.
 fn plane_through(scene: &TriScene, tri: u32, light: DVec3) -> bool {
-    let v = scene.triangle_f64(tri);
-    let (e1, e2) = (v[1] - v[0], v[2] - v[0]);
-    let n = e1.cross(e2);
-    let spread = DVec3::new(
-        (e1.y * e2.z).abs() + (e1.z * e2.y).abs(),
-        (e1.z * e2.x).abs() + (e1.x * e2.z).abs(),
-        (e1.x * e2.y).abs() + (e1.y * e2.x).abs(),
-    );
-    let delta = light - v[0];
-    let dist = n.dot(delta).abs();
-    let g = rendiff_core::math::gamma64(4);
-    dist <= 2.0 * g * (n.abs() + spread).dot(delta.abs())
+    let plane = TriPlane::of(scene, tri);
+    let (dist, bound) = plane.dot(light - plane.v0);
+    dist.abs() <= bound
+}
+
+/// A triangle's plane in `f64` for sign tests: `n = (v1 − v0) × (v2 −
+/// v0)` and what bounds the rounding of `n·Δ` ([`TriPlane::dot`]).
+struct TriPlane {
+    v0: DVec3,
+    n: DVec3,
+    /// `|n| + spread`, `spread_i = |e1_j e2_k| + |e1_k e2_j|`.
+    weight: DVec3,
+}
+
+impl TriPlane {
+    fn of(scene: &TriScene, tri: u32) -> TriPlane {
+        let v = scene.triangle_f64(tri);
+        let (e1, e2) = (v[1] - v[0], v[2] - v[0]);
+        let n = e1.cross(e2);
+        let spread = DVec3::new(
+            (e1.y * e2.z).abs() + (e1.z * e2.y).abs(),
+            (e1.z * e2.x).abs() + (e1.x * e2.z).abs(),
+            (e1.x * e2.y).abs() + (e1.y * e2.x).abs(),
+        );
+        TriPlane {
+            v0: v[0],
+            n,
+            weight: n.abs() + spread,
+        }
+    }
+
+    /// `n·delta` and the bound on its rounding (see [`plane_through`]):
+    /// beyond it, its sign is the exact one.
+    fn dot(&self, delta: DVec3) -> (f64, f64) {
+        let g = rendiff_core::math::gamma64(4);
+        (self.n.dot(delta), 2.0 * g * self.weight.dot(delta.abs()))
+    }
+}
+
+/// The triangle a shadow ray leaves untested: the one it leaves
+/// ([`ShadowQuery::leaves`]) where its origin lies strictly on one side of
+/// that triangle's plane (or exactly on it) and its direction points
+/// strictly away from it, each sign certain beyond its rounding
+/// ([`TriPlane::dot`]); else none.
+///
+/// The exact line then meets the plane only at `t ≤ 0`, and the `f64`
+/// test rejects every `t` within its own error bound of a `t ≤ 0`
+/// (`triangle::intersect`, pbrt-v4's δt): the test could only reject the
+/// triangle. The origin's own side is not enough: it is chosen in `f32`
+/// from the light's direction as shading saw it, and a light within
+/// about 10⁻⁷ of the plane, or a triangle so small that its `f32` normal
+/// underflows, can put the segment's far end on the other side (then the
+/// ray crosses its triangle, and is shadowed by it, as before).
+fn leaves_behind(
+    scene: &TriScene,
+    q: &ShadowQuery,
+    ray: &Ray64,
+    last: &mut Option<(u32, TriPlane)>,
+) -> u32 {
+    let tri = q.leaves;
+    if tri as usize >= scene.len() {
+        return bvh::NO_SKIP;
+    }
+    // Neighbouring samples' rays leave the same triangle: its plane once.
+    let plane = match last {
+        Some((t, p)) if *t == tri => p,
+        _ => &last.insert((tri, TriPlane::of(scene, tri))).1,
+    };
+    let (side, side_bound) = plane.dot(ray.origin - plane.v0);
+    let (along, along_bound) = plane.dot(ray.dir);
+    // On the plane exactly (every term of `n·Δ` exact: a floor at y = 0,
+    // whose points' error bound is zero and so their offset), the line
+    // meets the plane at t = 0 itself, which the test rejects as well.
+    let on_plane = side == 0.0 && side_bound == 0.0;
+    let side_certain = side.abs() > side_bound;
+    let away =
+        along.abs() > along_bound && (on_plane || side_certain && (side > 0.0) == (along > 0.0));
+    if away { tri } else { bvh::NO_SKIP }
 }
 
 /// `true` when a crossing of an analytic shape at `t` is the light itself:
@@ -647,18 +724,20 @@ impl Visibility for ShadowRays<'_, '_> {
         // surface through the light itself is not an occluder.
         let mut crossings: Vec<(f64, u32, [f32; 3])> = Vec::new();
         let mut blocked = false;
-        a.bvh.for_each_hit(&ray, q.leaves, |id, h| {
-            let class = a.class[id as usize];
-            if class == ShadowClass::None || light.is_some_and(|l| plane_through(scene, id, l)) {
-                return false;
-            }
-            if class == ShadowClass::Opaque {
-                blocked = true;
-                return true;
-            }
-            crossings.push((h.t64, id, h.b));
-            false
-        });
+        a.bvh
+            .for_each_hit(&ray, leaves_behind(scene, q, &ray, &mut None), |id, h| {
+                let class = a.class[id as usize];
+                if class == ShadowClass::None || light.is_some_and(|l| plane_through(scene, id, l))
+                {
+                    return false;
+                }
+                if class == ShadowClass::Opaque {
+                    blocked = true;
+                    return true;
+                }
+                crossings.push((h.t64, id, h.b));
+                false
+            });
         if blocked {
             return Rgb::BLACK;
         }

@@ -198,7 +198,7 @@ pub enum BvhBuild {
     #[default]
     Sah,
     /// Morton order (a linear BVH): about three times faster to build, its
-    /// walks 0–9 % slower, for frames that cast few rays per triangle.
+    /// walks 0–21 % slower, for frames that cast few rays per triangle.
     Morton,
 }
 
@@ -210,9 +210,13 @@ impl BvhBuild {
     /// the build 583–617 ms by the SAH against 186–197 ms in Morton order
     /// (0.44 µs a triangle saved), primary rays 389–410 against 391–394 ms
     /// for 2 073 600 rays (within noise), shadow rays 266–281 against
-    /// 243–262 ms for 551 746 rays (0.03–0.04 µs a ray more). The build
-    /// pays back below about ten rays per triangle there; four leaves
-    /// room for scenes whose triangles sort less well (on the bundled
+    /// 243–262 ms for 551 746 rays (0.03–0.04 µs a ray more). In two
+    /// `make peers` runs the Morton tree's walks took 0.99–1.08× the SAH
+    /// tree's time for primary rays and 1.14–1.21× for shadow rays (up to
+    /// 0.1 µs a shadow ray): the build pays back below 4.6 rays per
+    /// triangle where the rays are all shadow rays, below about 30 where
+    /// they are primary rays. Four keeps on the safe side of both, and of
+    /// scenes whose triangles sort less well (on the bundled
     /// `textured.toml` the Morton tree's walks take 14–23 % more
     /// instructions, but its few triangles make the build negligible).
     pub const MORTON_BELOW_RAYS_PER_TRIANGLE: u64 = 4;

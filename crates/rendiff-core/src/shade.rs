@@ -266,12 +266,15 @@ pub trait Visibility: Sync {
 /// applied where the crossings are found: the accel crate's `ShadowRays`).
 ///
 /// `leaves` is the primitive the ray leaves ([`SurfacePoint::prim`]). The
-/// origin lies off that primitive's surface toward the side the ray goes
-/// ([`offset_origin`]), so a ray that leaves a *triangle* cannot meet its
-/// plane again: the ray queries do not test that triangle (its exact test
-/// could only reject it; `tests/it/ray.rs` holds that over every bundled
-/// and hazard scene). A curved analytic surface can be met again (from
-/// inside a sphere) and is always tested.
+/// ray queries leave that triangle untested where the origin lies strictly
+/// on one side of its plane (or exactly on it) and the direction points
+/// strictly away from it, both signs certain in `f64`: its exact test
+/// could only reject it then (the accel crate's
+/// `Accel::skips_its_own_triangle`). Not wherever the ray leaves it: the
+/// origin's side is chosen in `f32` ([`offset_origin`]) from the light's
+/// direction as shading saw it, and a light within about 10⁻⁷ of the
+/// plane can lie on the other side. A curved analytic surface can be met
+/// again (from inside a sphere) and is always tested.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ShadowQuery {
     /// Index of the light.
@@ -285,7 +288,8 @@ pub struct ShadowQuery {
     /// Unit geometric normal of the surface the ray leaves.
     pub normal: Vec3,
     /// The primitive the ray leaves ([`SurfacePoint::prim`]; `u32::MAX`:
-    /// none): a triangle with this id is not tested.
+    /// none): a triangle with this id is not tested where the ray
+    /// certainly moves away from its plane.
     pub leaves: u32,
 }
 
