@@ -835,6 +835,48 @@ radius = 1.0
     assert!(checked > 10_000, "{checked} samples");
 }
 
+/// Every bundled and hazard scene (at least twenty), loaded at 96×72, in
+/// the order of their paths.
+fn every_scene_small() -> Vec<(std::path::PathBuf, Prepared)> {
+    let mut paths = Vec::new();
+    for dir in ["scenes", "tests/data/hazards"] {
+        for e in std::fs::read_dir(crate::util::root().join(dir)).unwrap() {
+            let p = e.unwrap().path();
+            if p.extension().is_some_and(|x| x == "toml") {
+                paths.push(p);
+            }
+        }
+    }
+    paths.sort();
+    assert!(paths.len() >= 20, "the scenes are found");
+    let ov = Overrides {
+        size: Some((96, 72)),
+        ..Overrides::default()
+    };
+    paths
+        .into_iter()
+        .map(|p| {
+            let job = Prepared::load(&p, &ov).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+            (p, job)
+        })
+        .collect()
+}
+
+/// The ray tracer's frame of `job` through `accel`, with the plan's ray
+/// tree and shadows.
+fn ray_frame(job: &Prepared, accel: &Accel<'_>) -> rendiff::frame::Frame {
+    let opts = rendiff::ray::RayOptions {
+        max_depth: if job.plan.ray_tree {
+            job.tri.max_depth.max(1)
+        } else {
+            1
+        },
+        shadows: job.plan.shadows,
+        gate_eps: rendiff::GATE_EPS,
+    };
+    rendiff::ray::render(accel, &opts)
+}
+
 /// The shadow queries shading makes at every primary hit on a triangle
 /// (the ray tracer's surface point and normal), each traced without
 /// skipping anything: (queries, those the ray queries skip their own
@@ -886,23 +928,8 @@ fn own_triangle_skips(job: &Prepared) -> (u64, u64, u64) {
 /// (the saving is real).
 #[test]
 fn a_shadow_ray_skips_its_triangle_only_where_it_cannot_meet_it() {
-    let mut paths = Vec::new();
-    for dir in ["scenes", "tests/data/hazards"] {
-        for e in std::fs::read_dir(crate::util::root().join(dir)).unwrap() {
-            let p = e.unwrap().path();
-            if p.extension().is_some_and(|x| x == "toml") {
-                paths.push(p);
-            }
-        }
-    }
-    paths.sort();
-    let ov = Overrides {
-        size: Some((96, 72)),
-        ..Overrides::default()
-    };
     let (mut total, mut skipped) = (0, 0);
-    for path in &paths {
-        let job = Prepared::load(path, &ov).unwrap();
+    for (path, job) in every_scene_small() {
         let (queries, skips, met) = own_triangle_skips(&job);
         assert_eq!(
             met,
@@ -1023,23 +1050,7 @@ fn skipping_the_own_triangle_changes_no_shadow() {
 #[test]
 fn every_bvh_build_renders_every_scene_bit_for_bit() {
     use rendiff::accel::BvhBuild;
-    let mut paths = Vec::new();
-    for dir in ["scenes", "tests/data/hazards"] {
-        for e in std::fs::read_dir(crate::util::root().join(dir)).unwrap() {
-            let p = e.unwrap().path();
-            if p.extension().is_some_and(|x| x == "toml") {
-                paths.push(p);
-            }
-        }
-    }
-    paths.sort();
-    assert!(paths.len() >= 20, "the scenes are found");
-    let ov = Overrides {
-        size: Some((96, 72)),
-        ..Overrides::default()
-    };
-    for path in &paths {
-        let job = Prepared::load(path, &ov).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    for (path, job) in every_scene_small() {
         let frame = |build| {
             let accel = Accel::new(
                 &job.tri,
@@ -1050,16 +1061,7 @@ fn every_bvh_build_renders_every_scene_bit_for_bit() {
                     ..AccelOptions::default()
                 },
             );
-            let opts = rendiff::ray::RayOptions {
-                max_depth: if job.plan.ray_tree {
-                    job.tri.max_depth.max(1)
-                } else {
-                    1
-                },
-                shadows: job.plan.shadows,
-                gate_eps: rendiff::GATE_EPS,
-            };
-            rendiff::ray::render(&accel, &opts)
+            ray_frame(&job, &accel)
         };
         assert!(
             frame(BvhBuild::Sah) == frame(BvhBuild::Morton),
@@ -1110,24 +1112,8 @@ fn the_build_follows_the_rays_per_triangle() {
 #[test]
 fn every_simd_path_renders_every_scene_bit_for_bit() {
     use rendiff::accel::SimdPath;
-    let mut paths = Vec::new();
-    for dir in ["scenes", "tests/data/hazards"] {
-        for e in std::fs::read_dir(crate::util::root().join(dir)).unwrap() {
-            let p = e.unwrap().path();
-            if p.extension().is_some_and(|x| x == "toml") {
-                paths.push(p);
-            }
-        }
-    }
-    paths.sort();
-    assert!(paths.len() >= 20, "the scenes are found");
-    let ov = Overrides {
-        size: Some((96, 72)),
-        ..Overrides::default()
-    };
     let mut names = std::collections::BTreeSet::new();
-    for path in &paths {
-        let job = Prepared::load(path, &ov).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    for (path, job) in every_scene_small() {
         let mut frame = |simd| {
             let accel = Accel::new(
                 &job.tri,
@@ -1139,16 +1125,7 @@ fn every_simd_path_renders_every_scene_bit_for_bit() {
                 },
             );
             names.insert(accel.simd());
-            let opts = rendiff::ray::RayOptions {
-                max_depth: if job.plan.ray_tree {
-                    job.tri.max_depth.max(1)
-                } else {
-                    1
-                },
-                shadows: job.plan.shadows,
-                gate_eps: rendiff::GATE_EPS,
-            };
-            rendiff::ray::render(&accel, &opts)
+            ray_frame(&job, &accel)
         };
         let base = frame(SimdPath::Baseline);
         let auto = frame(SimdPath::Auto);
