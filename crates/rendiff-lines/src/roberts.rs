@@ -929,15 +929,36 @@ mod tests {
         t1 - t0 > 1e-9
     }
 
+    /// Whether `x`, a point of edge `e`, lies within the rounding
+    /// tolerance of a bounding plane of the volume one of `polys` (not
+    /// `own`) hides: there Roberts counts it as not behind the plane by
+    /// design, and the exact count may differ. δ is the algorithm's own,
+    /// the plane's tolerance at the edge's farther end.
+    fn in_tolerance_band(polys: &[Poly], own: u32, e: &Edge, x: DVec3, rho: f64) -> bool {
+        polys.iter().filter(|p| p.object != own).any(|p| {
+            p.cone
+                .iter()
+                .chain(p.faces.iter().map(|f| &f.plane))
+                .any(|pl| {
+                    let delta = pl.tolerance(e.p[0], rho).max(pl.tolerance(e.p[1], rho));
+                    pl.eval(x).abs() <= delta
+                })
+        })
+    }
+
     proptest::proptest! {
         #![proptest_config(proptest::prelude::ProptestConfig::with_cases(256))]
         /// Roberts' QIs against brute force on random turned boxes and
         /// tessellated spheres (some overlapping, seen in perspective or
         /// orthographically; the spheres have enough faces for the face
-        /// grid): at points along every piece, away from its ends, the
-        /// number of other objects the sight segment passes through — by
-        /// clipping the sight segment, not the edge, against all their
-        /// planes — is the piece's QI.
+        /// grid): at points along every piece, the number of other objects
+        /// the sight segment passes through — by clipping the sight
+        /// segment, not the edge, against all their planes — is the
+        /// piece's QI, except within the tolerance band δ of a bounding
+        /// plane, where the point counts as not behind it by design (a
+        /// fixed margin of 1e-4 in s at the pieces' ends was not enough:
+        /// CI's seed d7a8e684 has a sphere face of δ = 5.6e-5 crossed at a
+        /// slope of 0.42 per unit of s, which moves the end by 1.3e-4).
         #[test]
         fn qis_match_sight_segments_through_objects(
             objects in proptest::collection::vec(
@@ -966,26 +987,34 @@ mod tests {
             let cam = Camera::new(eye, DVec3::ZERO, DVec3::Y, base.projection(), 400, 400, 1, 0.01, 100.0).unwrap();
             let s = scene(cam, &meshes);
             let d = roberts_lines(&s, &LinesOptions { hidden: true, ..LinesOptions::default() }).unwrap();
+            // The drawn edges and the hiding volumes, to skip the points
+            // within the tolerance band of a bounding plane.
+            let opts = LinesOptions::default();
+            let base_lines = Base::new(&s, &opts);
+            let keys = mesh_edges(&s);
+            let per_object = edges_by_object(&s, &keys);
+            let polys: Vec<Poly> = (0..u32::try_from(meshes.len()).unwrap())
+                .map(|o| Poly::new(&base_lines, o, &per_object[o as usize]))
+                .collect();
+            let edges = base_lines.drawn_edges(&keys);
+            let rho = vertex_rounding(largest_coordinate(&s));
             let mut checked = 0;
             for seg in &d.segments {
-                let own = s.tri_object[seg.tris[0] as usize] as usize;
+                let own = s.tri_object[seg.tris[0] as usize];
+                let e = edges.iter().find(|e| e.tris == seg.tris).unwrap();
                 for k in 1..20 {
                     let u = f64::from(k) / 20.0;
-                    let len = seg.s.1 - seg.s.0;
-                    // Away from the ends, where the tolerance moves them.
-                    if len * u.min(1.0 - u) < 1e-4 {
-                        continue;
-                    }
                     let x = seg.p[0] + (seg.p[1] - seg.p[0]) * u;
                     let sight = if ortho { x - cam.forward() * cam.view_depth(x) } else { eye };
                     let count = meshes
                         .iter()
                         .enumerate()
-                        .filter(|&(i, m)| i != own && through(m, x, sight))
+                        .filter(|&(i, m)| i != own as usize && through(m, x, sight))
                         .count();
                     checked += 1;
-                    proptest::prop_assert_eq!(
-                        count, seg.qi as usize,
+                    // Within the band the count may differ by design.
+                    proptest::prop_assert!(
+                        count == seg.qi as usize || in_tolerance_band(&polys, own, e, x, rho),
                         "piece {:?} at u {}: {} objects in front, QI {}", seg.s, u, count, seg.qi
                     );
                 }
