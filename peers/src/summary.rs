@@ -113,6 +113,15 @@ pub fn summary(repeats: usize) -> Result<()> {
         now: format!("{geo:.2}× (worst {worst:.2}×, {worst_scene})"),
         target: "≥ 10× (worst ≥ 5×)",
     });
+    let adversarial = adversarial()?;
+    let adv = crate::povray_cmp(&adversarial, &[1], repeats)?;
+    let (_, geo, worst, worst_scene) = adv.first().context("no POV-Ray figures")?;
+    rows.push(Row {
+        measure: "render phase vs POV-Ray 3.7, the adversarial scenes of benches/scenes/adversarial (worst)",
+        before: "—",
+        now: format!("{geo:.2}× (worst {worst:.2}×, {worst_scene})"),
+        target: "(the bundled scenes' row)",
+    });
     let dense = Path::new("scenes/dense.toml");
     let (ours_ms, pov_ms) = whole_process(dense, repeats.min(5))?;
     rows.push(Row {
@@ -350,8 +359,20 @@ pub fn obj_load(repeats: usize) -> Result<(f64, f64, usize)> {
 
 /// The bundled scenes, sorted.
 pub fn bundled() -> Result<Vec<PathBuf>> {
-    let mut scenes: Vec<PathBuf> = std::fs::read_dir("scenes")
-        .context("run from the repository root")?
+    scenes_in(Path::new("scenes"))
+}
+
+/// The adversarial scenes (`benches/scenes/adversarial`), sorted: written
+/// to find where rendiff is slowest against POV-Ray, outside the bundled
+/// set that the project's work was measured on.
+pub fn adversarial() -> Result<Vec<PathBuf>> {
+    scenes_in(Path::new("benches/scenes/adversarial"))
+}
+
+/// The scene files of a folder, sorted.
+fn scenes_in(dir: &Path) -> Result<Vec<PathBuf>> {
+    let mut scenes: Vec<PathBuf> = std::fs::read_dir(dir)
+        .with_context(|| format!("{}: run from the repository root", dir.display()))?
         .filter_map(Result::ok)
         .map(|e| e.path())
         .filter(|p| p.extension().is_some_and(|x| x == "toml"))
