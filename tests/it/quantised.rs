@@ -258,6 +258,21 @@ fn float_images_compare_exactly() {
     let (code, text) = rendiff(&["diff", "a.pfm", "bad.pfm"], dir.path());
     assert_eq!(code, 2, "{text}");
     assert!(text.contains("bad.pfm"), "{text}");
+    // A scale of zero, NaN or infinity gives no byte order: refused, naming
+    // the file and the scale (it was read as big-endian).
+    for scale in ["0.0", "-0", "nan", "inf", "-inf"] {
+        let mut bytes = format!("PF\n4 3\n{scale}\n").into_bytes();
+        for v in &base {
+            bytes.extend_from_slice(&v.to_le_bytes());
+        }
+        std::fs::write(dir.path().join("scale.pfm"), bytes).unwrap();
+        let (code, text) = rendiff(&["diff", "a.pfm", "scale.pfm"], dir.path());
+        assert_eq!(code, 2, "{scale}: {text}");
+        assert!(
+            text.contains("scale.pfm") && text.contains("byte order"),
+            "{scale}: {text}"
+        );
+    }
 }
 
 #[test]

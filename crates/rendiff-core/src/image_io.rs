@@ -725,9 +725,18 @@ fn read_pfm(
             .map_err(|_| bad(format!("expected a size, got \"{t}\"")))
     };
     let (w, h) = (parse(&tokens[1])?, parse(&tokens[2])?);
+    // The scale's sign is the byte order (negative: little-endian); zero
+    // or a non-finite scale says neither.
     let scale: f32 = tokens[3]
         .parse()
-        .map_err(|_| bad(format!("expected the scale, got \"{}\"", tokens[3])))?;
+        .ok()
+        .filter(|s: &f32| *s != 0.0 && s.is_finite())
+        .ok_or_else(|| {
+            bad(format!(
+                "expected the scale, a nonzero finite number whose sign is the byte order (negative: little-endian), got \"{}\"",
+                tokens[3]
+            ))
+        })?;
     if let Some((ew, eh)) = expect
         && (w, h) != (ew, eh)
     {

@@ -35,6 +35,15 @@ fn io(path: &Path, source: std::io::Error) -> ImageIoError {
     }
 }
 
+/// Removes the folders `made` (deepest first) while they are empty.
+fn remove_empty(made: &[PathBuf]) {
+    for dir in made {
+        if std::fs::remove_dir(dir).is_err() {
+            break;
+        }
+    }
+}
+
 /// Refuses an output file that is one of `inputs` (the same file: device
 /// and inode, through any link or spelling), or an output folder that is
 /// or holds one.
@@ -83,7 +92,20 @@ pub fn refuse_inputs(out: &Path, inputs: &[PathBuf]) -> Result<(), ImageIoError>
 pub struct OutputDir {
     target: PathBuf,
     fresh: Option<tempfile::TempDir>,
+    /// The folders of the target's path that [`OutputDir::begin`] made,
+    /// deepest first: removed again (where still empty) unless the set is
+    /// committed, so a run that fails leaves nothing behind.
+    made: Vec<PathBuf>,
     _guard: crate::cleanup::TempGuard,
+}
+
+impl Drop for OutputDir {
+    fn drop(&mut self) {
+        // The fresh folder first (its parent is among `made`).
+        drop(self.fresh.take());
+        // Only an empty folder goes: never what someone put there.
+        remove_empty(&self.made);
+    }
 }
 
 impl OutputDir {
@@ -127,6 +149,7 @@ impl OutputDir {
         // The folders of the path the user named are made as `mkdir -p`
         // would (a fresh checkout has no `out/`); a file in their way is
         // refused by name.
+        let mut made = Vec::new();
         if !parent.is_dir() {
             if let Some(file) = parent.ancestors().find(|p| p.is_file()) {
                 return Err(refused(
@@ -134,21 +157,36 @@ impl OutputDir {
                     format!("{} is a file, not a folder", file.display()),
                 ));
             }
-            std::fs::create_dir_all(parent).map_err(|e| io(parent, e))?;
+            made = parent
+                .ancestors()
+                .take_while(|p| !p.as_os_str().is_empty() && !p.exists())
+                .map(Path::to_path_buf)
+                .collect();
+            if let Err(e) = std::fs::create_dir_all(parent) {
+                remove_empty(&made);
+                return Err(io(parent, e));
+            }
         }
         let name = target
             .file_name()
             .map_or_else(|| "out".into(), |n| n.to_string_lossy().into_owned());
         let prefix = format!(".{name}.");
-        let fresh = tempfile::Builder::new()
+        let fresh = match tempfile::Builder::new()
             .prefix(&prefix)
             .suffix(".tmp")
             .tempdir_in(parent)
-            .map_err(|e| io(target, e))?;
+        {
+            Ok(f) => f,
+            Err(e) => {
+                remove_empty(&made);
+                return Err(io(target, e));
+            }
+        };
         let guard = crate::cleanup::TempGuard::new(fresh.path());
         Ok(OutputDir {
             target: target.to_path_buf(),
             fresh: Some(fresh),
+            made,
             _guard: guard,
         })
     }
@@ -193,6 +231,16 @@ impl OutputDir {
     ///
     /// The I/O error; the target then holds its old set.
     pub fn commit(mut self) -> Result<(), ImageIoError> {
+        let swapped = self.swap_in();
+        if swapped.is_ok() {
+            // The folders made for it now hold the set.
+            self.made.clear();
+        }
+        swapped
+    }
+
+    /// [`OutputDir::commit`]'s swap.
+    fn swap_in(&mut self) -> Result<(), ImageIoError> {
         let Some(fresh) = self.fresh.take() else {
             return Ok(());
         };
@@ -340,6 +388,35 @@ fn sanitise(s: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The folders `begin` makes for a new target's path are gone again
+    /// when the set is not committed (a run that fails writes nothing),
+    /// stay when it is, and a folder that was there is never removed, nor
+    /// one that something else wrote into meanwhile.
+    #[test]
+    fn an_uncommitted_set_leaves_no_folders_behind() {
+        let root = tempfile::tempdir().unwrap();
+        let target = root.path().join("a/b/c/out");
+        let set = OutputDir::begin(&target, &[]).unwrap();
+        std::fs::write(set.path().join("x.png"), b"x").unwrap();
+        assert!(root.path().join("a/b/c").is_dir());
+        drop(set);
+        assert!(!root.path().join("a").exists(), "the made folders are gone");
+        assert!(root.path().is_dir(), "the folder that was there stays");
+
+        let set = OutputDir::begin(&target, &[]).unwrap();
+        std::fs::write(set.path().join("x.png"), b"x").unwrap();
+        set.commit().unwrap();
+        assert!(target.join("x.png").is_file() && target.join(MARKER).is_file());
+
+        // Something else writes beside the set: that folder stays.
+        let other = root.path().join("d/e/out");
+        let set = OutputDir::begin(&other, &[]).unwrap();
+        std::fs::write(root.path().join("d/theirs.txt"), b"x").unwrap();
+        drop(set);
+        assert!(!root.path().join("d/e").exists());
+        assert!(root.path().join("d/theirs.txt").is_file());
+    }
 
     #[test]
     fn scene_folders_stay_inside_and_apart() {
