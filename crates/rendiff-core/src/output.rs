@@ -395,24 +395,27 @@ mod tests {
     /// one that something else wrote into meanwhile.
     #[test]
     fn an_uncommitted_set_leaves_no_folders_behind() {
+        let write = |p: &Path| {
+            crate::image_io::write_atomic(p, |f| std::io::Write::write_all(f, b"x")).unwrap();
+        };
         let root = tempfile::tempdir().unwrap();
         let target = root.path().join("a/b/c/out");
         let set = OutputDir::begin(&target, &[]).unwrap();
-        std::fs::write(set.path().join("x.png"), b"x").unwrap();
+        write(&set.path().join("x.png"));
         assert!(root.path().join("a/b/c").is_dir());
         drop(set);
         assert!(!root.path().join("a").exists(), "the made folders are gone");
         assert!(root.path().is_dir(), "the folder that was there stays");
 
         let set = OutputDir::begin(&target, &[]).unwrap();
-        std::fs::write(set.path().join("x.png"), b"x").unwrap();
+        write(&set.path().join("x.png"));
         set.commit().unwrap();
         assert!(target.join("x.png").is_file() && target.join(MARKER).is_file());
 
         // Something else writes beside the set: that folder stays.
         let other = root.path().join("d/e/out");
         let set = OutputDir::begin(&other, &[]).unwrap();
-        std::fs::write(root.path().join("d/theirs.txt"), b"x").unwrap();
+        write(&root.path().join("d/theirs.txt"));
         drop(set);
         assert!(!root.path().join("d/e").exists());
         assert!(root.path().join("d/theirs.txt").is_file());
