@@ -35,11 +35,15 @@ fn io(path: &Path, source: std::io::Error) -> ImageIoError {
     }
 }
 
-/// Removes the folders `made` (deepest first) while they are empty.
+/// Removes the folders `made` (deepest first) while they are empty; one
+/// already gone is passed over, one that holds something stops it (so do
+/// the folders around it).
 fn remove_empty(made: &[PathBuf]) {
     for dir in made {
-        if std::fs::remove_dir(dir).is_err() {
-            break;
+        match std::fs::remove_dir(dir) {
+            Ok(()) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(_) => break,
         }
     }
 }
@@ -157,14 +161,23 @@ impl OutputDir {
                     format!("{} is a file, not a folder", file.display()),
                 ));
             }
-            made = parent
+            // Each missing level made here, outermost first; only the
+            // ones this call made are recorded (a level that turns out
+            // to exist, such as `a/..`, or that another process made
+            // meanwhile, is not), deepest first.
+            let missing: Vec<&Path> = parent
                 .ancestors()
-                .take_while(|p| !p.as_os_str().is_empty() && !p.exists())
-                .map(Path::to_path_buf)
+                .take_while(|p| !p.as_os_str().is_empty() && !p.is_dir())
                 .collect();
-            if let Err(e) = std::fs::create_dir_all(parent) {
-                remove_empty(&made);
-                return Err(io(parent, e));
+            for dir in missing.into_iter().rev() {
+                match std::fs::create_dir(dir) {
+                    Ok(()) => made.insert(0, dir.to_path_buf()),
+                    Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists && dir.is_dir() => {}
+                    Err(e) => {
+                        remove_empty(&made);
+                        return Err(io(dir, e));
+                    }
+                }
             }
         }
         let name = target
@@ -411,6 +424,27 @@ mod tests {
         write(&set.path().join("x.png"));
         set.commit().unwrap();
         assert!(target.join("x.png").is_file() && target.join(MARKER).is_file());
+
+        // A path through `..` names a folder that was there: it stays,
+        // and the folders made on the way are gone.
+        let existing = root.path().join("existing");
+        std::fs::create_dir(&existing).unwrap();
+        let set = OutputDir::begin(&root.path().join("new/../existing/x/out"), &[]).unwrap();
+        drop(set);
+        assert!(
+            existing.is_dir(),
+            "a folder that was there is never removed"
+        );
+        assert!(!existing.join("x").exists() && !root.path().join("new").exists());
+        // A level that cannot be made (a name too long) fails the call, and
+        // the levels made before it are gone.
+        let long = "n".repeat(300);
+        let e = OutputDir::begin(&root.path().join(format!("p/q/{long}/out")), &[]);
+        assert!(e.is_err());
+        assert!(
+            !root.path().join("p").exists(),
+            "left behind after a failed begin"
+        );
 
         // Something else writes beside the set: that folder stays.
         let other = root.path().join("d/e/out");

@@ -929,19 +929,30 @@ mod tests {
         t1 - t0 > 1e-9
     }
 
-    /// Whether `x`, a point of edge `e`, lies within the rounding
-    /// tolerance of a bounding plane of the volume one of `polys` (not
-    /// `own`) hides: there Roberts counts it as not behind the plane by
-    /// design, and the exact count may differ. δ is the algorithm's own,
-    /// the plane's tolerance at the edge's farther end.
-    fn in_tolerance_band(polys: &[Poly], own: u32, e: &Edge, x: DVec3, rho: f64) -> bool {
-        polys.iter().filter(|p| p.object != own).any(|p| {
+    /// Whether the exact count may exceed the algorithm's at `x`, a point
+    /// of edge `e`: some object that hides `x` exactly (`hiding`) has a
+    /// bounding plane of its hidden volume with `x` on its inner side but
+    /// within the rounding tolerance δ of it, where Roberts counts `x` as
+    /// not behind it by design (h(x) ∈ [−δ, 0], 0 raised by the rounding
+    /// of h's own evaluation). δ is the algorithm's own, the plane's
+    /// tolerance at the edge's farther end. (A δ that is itself too large
+    /// would excuse itself here; `the_hidden_interval_is_exact` holds δ to
+    /// its derived size.)
+    fn within_tolerance_of_a_hider(
+        polys: &[Poly],
+        hiding: &[bool],
+        e: &Edge,
+        x: DVec3,
+        rho: f64,
+    ) -> bool {
+        polys.iter().filter(|p| hiding[p.object as usize]).any(|p| {
             p.cone
                 .iter()
                 .chain(p.faces.iter().map(|f| &f.plane))
                 .any(|pl| {
                     let delta = pl.tolerance(e.p[0], rho).max(pl.tolerance(e.p[1], rho));
-                    pl.eval(x).abs() <= delta
+                    let h = pl.eval(x);
+                    -delta <= h && h <= gamma64(8) * (x.length() + pl.d.abs())
                 })
         })
     }
@@ -954,8 +965,9 @@ mod tests {
         /// grid): at points along every piece, the number of other objects
         /// the sight segment passes through — by clipping the sight
         /// segment, not the edge, against all their planes — is the
-        /// piece's QI, except within the tolerance band δ of a bounding
-        /// plane, where the point counts as not behind it by design (a
+        /// piece's QI, except that it may count fewer within the tolerance
+        /// δ inside a bounding plane of a hiding object, where the point
+        /// counts as not behind it by design (a
         /// fixed margin of 1e-4 in s at the pieces' ends was not enough:
         /// CI's seed d7a8e684 has a sphere face of δ = 5.6e-5 crossed at a
         /// slope of 0.42 per unit of s, which moves the end by 1.3e-4).
@@ -1006,15 +1018,21 @@ mod tests {
                     let u = f64::from(k) / 20.0;
                     let x = seg.p[0] + (seg.p[1] - seg.p[0]) * u;
                     let sight = if ortho { x - cam.forward() * cam.view_depth(x) } else { eye };
-                    let count = meshes
+                    let hiding: Vec<bool> = meshes
                         .iter()
                         .enumerate()
-                        .filter(|&(i, m)| i != own as usize && through(m, x, sight))
-                        .count();
+                        .map(|(i, m)| i != own as usize && through(m, x, sight))
+                        .collect();
+                    let count = hiding.iter().filter(|&&h| h).count();
                     checked += 1;
-                    // Within the band the count may differ by design.
+                    // Roberts hides a point only more than δ inside every
+                    // bounding plane, so it never counts more than the
+                    // exact count, and fewer only within δ of a hider's
+                    // plane.
                     proptest::prop_assert!(
-                        count == seg.qi as usize || in_tolerance_band(&polys, own, e, x, rho),
+                        count == seg.qi as usize
+                            || (count > seg.qi as usize
+                                && within_tolerance_of_a_hider(&polys, &hiding, e, x, rho)),
                         "piece {:?} at u {}: {} objects in front, QI {}", seg.s, u, count, seg.qi
                     );
                 }
