@@ -5,7 +5,8 @@
 //! Embree 3 (the 940 k-triangle bunny at 1080p), the build at ten million
 //! triangles, the rasterizer's shaded frame against the ray tracer's (BVH
 //! prebuilt) and against Mesa llvmpipe, the render phase against POV-Ray
-//! 3.7 over the bundled scenes, the whole process against POV-Ray's on
+//! 3.7 over the bundled scenes and over the adversarial ones
+//! (`benches/scenes/adversarial`), the whole process against POV-Ray's on
 //! the largest bundled mesh scene, and loading a 177 k-triangle OBJ. All
 //! on one thread, medians.
 
