@@ -113,18 +113,14 @@ fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let Some(cmd) = args.first() else {
         bail!(
-            "usage: rendiff-peers summary [--repeats N] | trees [SCENE] [--subdivide K] [--repeats N] | embree [SCENE] [--subdivide K] [--repeats N] | povray [SCENE...] [--threads 1,2] [--repeats N] | llvmpipe [--repeats N] | objload [--repeats N] | profile SCENE [--backend raster|ray] [--subdivide K] [--shadowless] [--build] [--repeats N]"
+            "usage: rendiff-peers summary [--repeats N] | trees [SCENE] [--subdivide K] [--repeats N] | embree [SCENE] [--subdivide K] [--morton] [--repeats N] | povray [SCENE...] [--threads 1,2] [--repeats N] | llvmpipe [--repeats N] | objload [--repeats N] | profile SCENE [--backend raster|ray] [--subdivide K] [--shadowless] [--build] [--repeats N]"
         );
     };
     let rest = &args[1..];
     let repeats: usize = flag(rest, "--repeats").map_or(Ok(5), |s| s.parse())?;
     match cmd.as_str() {
         "embree" => {
-            let scene = positional(rest)
-                .first()
-                .cloned()
-                .unwrap_or_else(|| PathBuf::from("benches/scenes/bunny_1m.toml"));
-            let k: u32 = flag(rest, "--subdivide").map_or(Ok(4), |s| s.parse())?;
+            let (scene, k) = bench_scene(rest)?;
             embree_cmp(&scene, k, build_flag(rest), repeats).map(|_| ())
         }
         "povray" => {
@@ -140,11 +136,7 @@ fn main() -> Result<()> {
         }
         "summary" => summary::summary(repeats),
         "trees" => {
-            let scene = positional(rest)
-                .first()
-                .cloned()
-                .unwrap_or_else(|| PathBuf::from("benches/scenes/bunny_1m.toml"));
-            let k: u32 = flag(rest, "--subdivide").map_or(Ok(4), |s| s.parse())?;
+            let (scene, k) = bench_scene(rest)?;
             trees(&scene, k, repeats).map(|_| ())
         }
         "objload" => summary::obj_load(repeats).map(|_| ()),
@@ -445,6 +437,17 @@ fn trees(scene: &Path, subdivide: u32, repeats: usize) -> Result<TreeFigures> {
         packets: [med(0, 1), med(1, 1)],
         shadow: [med(0, 2), med(1, 2)],
     })
+}
+
+/// The scene of `embree` and `trees` (default: the 940 k-triangle bunny)
+/// and how many times it is split (`--subdivide`, default 4).
+fn bench_scene(args: &[String]) -> Result<(PathBuf, u32)> {
+    let scene = positional(args)
+        .first()
+        .cloned()
+        .unwrap_or_else(|| PathBuf::from("benches/scenes/bunny_1m.toml"));
+    let k: u32 = flag(args, "--subdivide").map_or(Ok(4), |s| s.parse())?;
+    Ok((scene, k))
 }
 
 /// The BVH build the arguments ask for: Morton order with `--morton`,

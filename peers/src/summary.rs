@@ -105,24 +105,18 @@ pub fn summary(repeats: usize) -> Result<()> {
         now: llvm,
         target: "≥ 2×",
     });
-    let scenes = crate::bundled_scenes()?;
-    let pov = crate::povray_cmp(&scenes, &[1], repeats)?;
-    let (_, geo, worst, worst_scene) = pov.first().context("no POV-Ray figures")?;
-    rows.push(Row {
-        measure: "render phase vs POV-Ray 3.7, geometric mean over bundled scenes (worst)",
-        before: "4.7× (worst 2.8×)",
-        now: format!("{geo:.2}× (worst {worst:.2}×, {worst_scene})"),
-        target: "≥ 10× (worst ≥ 5×)",
-    });
-    let adversarial = adversarial()?;
-    let adv = crate::povray_cmp(&adversarial, &[1], repeats)?;
-    let (_, geo, worst, worst_scene) = adv.first().context("no POV-Ray figures")?;
-    rows.push(Row {
-        measure: "render phase vs POV-Ray 3.7, the adversarial scenes of benches/scenes/adversarial (worst)",
-        before: "—",
-        now: format!("{geo:.2}× (worst {worst:.2}×, {worst_scene})"),
-        target: "(the bundled scenes' row)",
-    });
+    rows.push(pov_row(
+        &crate::bundled_scenes()?,
+        repeats,
+        "render phase vs POV-Ray 3.7, geometric mean over bundled scenes (worst)",
+        ("4.7× (worst 2.8×)", "≥ 10× (worst ≥ 5×)"),
+    )?);
+    rows.push(pov_row(
+        &adversarial()?,
+        repeats,
+        "render phase vs POV-Ray 3.7, the adversarial scenes of benches/scenes/adversarial (worst)",
+        ("—", "(the bundled scenes' row)"),
+    )?);
     let dense = Path::new("scenes/dense.toml");
     let (ours_ms, pov_ms) = whole_process(dense, repeats.min(5))?;
     rows.push(Row {
@@ -148,6 +142,24 @@ pub fn summary(repeats: usize) -> Result<()> {
     }
     println!("{out}");
     Ok(())
+}
+
+/// The row of the render phase against POV-Ray over `scenes` (1 thread):
+/// the better backend's geometric mean and the worst scene.
+fn pov_row(
+    scenes: &[PathBuf],
+    repeats: usize,
+    measure: &'static str,
+    (before, target): (&'static str, &'static str),
+) -> Result<Row> {
+    let pov = crate::povray_cmp(scenes, &[1], repeats)?;
+    let (_, geo, worst, worst_scene) = pov.first().context("no POV-Ray figures")?;
+    Ok(Row {
+        measure,
+        before,
+        now: format!("{geo:.2}× (worst {worst:.2}×, {worst_scene})"),
+        target,
+    })
 }
 
 /// BVH build time per triangle at ten million triangles
