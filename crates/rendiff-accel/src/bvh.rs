@@ -962,9 +962,11 @@ impl Bvh {
     /// Tests the leaf starting at pack `first`: four triangles at a time
     /// for the edge test ([`candidates`]), then the survivors but triangle
     /// `skip` one by one in `f64`; `hit(id, hit, t_max)` may shrink `t_max`
-    /// and returns `true` to stop.
+    /// and returns `true` to stop. `SEGMENT` also drops triangles wholly
+    /// behind the origin or past the ray's `t_max` in the filter: only for
+    /// walks whose `t_max` stays the ray's own (any hit, every hit).
     #[inline(always)]
-    fn leaf_hits(
+    fn leaf_hits<const SEGMENT: bool>(
         &self,
         (pre, shear): (&RayPrecomp, &mut Option<[f64; 3]>),
         first: usize,
@@ -975,7 +977,7 @@ impl Bvh {
         let mut p = first;
         loop {
             let pack = &self.packs[p];
-            let mut lanes = candidates(pre, pack);
+            let mut lanes = candidates::<SEGMENT>(pre, pack);
             while lanes != 0 {
                 let lane = lanes.trailing_zeros() as usize;
                 lanes &= lanes - 1;
@@ -1325,7 +1327,7 @@ impl Bvh {
                     let mut t_max = ray.t_max;
                     let first = (node & !LEAF) as usize;
                     let skip = skips[r.min(n - 1)];
-                    if self.leaf_hits(
+                    if self.leaf_hits::<true>(
                         (pre, shear),
                         first,
                         (ray.t_min, skip),
@@ -1439,7 +1441,7 @@ impl Leaf for ClosestLeaf<'_> {
             .pre
             .get_or_insert_with(|| (RayPrecomp::of(ray, walk), None));
         let best = &mut self.best;
-        self.bvh.leaf_hits(
+        self.bvh.leaf_hits::<false>(
             (pre, shear),
             first,
             (ray.t_min, NO_SKIP),
@@ -1476,7 +1478,7 @@ impl<F: FnMut(u32, TriHit) -> bool> Leaf for EachLeaf<'_, F> {
             .pre
             .get_or_insert_with(|| (RayPrecomp::of(ray, walk), None));
         let visit = &mut self.visit;
-        self.bvh.leaf_hits(
+        self.bvh.leaf_hits::<true>(
             (pre, shear),
             first,
             (ray.t_min, self.skip),

@@ -136,6 +136,12 @@ pub(crate) struct RayPrecomp {
     s4: [Vec4; 2],
     /// Added to every vertex's `m` in [`candidates`]: `2Δo/γ₁₀`.
     m_shift: Vec4,
+    /// A triangle whose least translated `Z` is above `z_above`, or whose
+    /// greatest is below `z_below`, lies wholly behind the `f64` origin or
+    /// wholly past the `f64` ray's `t_max` (which of the two depends on
+    /// the sign of the direction's dominant component; see [`candidates`]).
+    z_above: Vec4,
+    z_below: Vec4,
 }
 
 impl RayPrecomp {
@@ -169,6 +175,25 @@ impl RayPrecomp {
         }
         let s = Vec3::new(d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]);
         let m_shift = f32_at_least(2.0 * walk.dorigin / f64::from(GAMMA_10));
+        // The distance bounds of [`candidates`] (derived there): `Δo`, and
+        // `t_max·|d_z|` enlarged by γ₁₆ for the `f64` test's rounding of
+        // `t`, plus `Δo`; each enlarged by 10⁻⁶ (> the `f32` rounding of
+        // a translated coordinate, 2⁻²⁴ relative) and rounded up.
+        let z_behind = f32_at_least(walk.dorigin * (1.0 + 1e-6));
+        let beyond =
+            (ray.t_max * ray.dir[kz].abs() * (1.0 + gamma64(16)) + walk.dorigin) * (1.0 + 1e-6);
+        let z_beyond = if beyond.is_nan() {
+            f32::INFINITY
+        } else {
+            f32_at_least(beyond)
+        };
+        // Along +z: behind is `Z < −z_behind`, past the end `Z > z_beyond`;
+        // along −z the two swap sides.
+        let (z_above, z_below) = if d[kz] < 0.0 {
+            (z_behind, -z_beyond)
+        } else {
+            (z_beyond, -z_behind)
+        };
         RayPrecomp {
             k: [kx, ky, kz],
             origin64: ray.origin,
@@ -176,6 +201,8 @@ impl RayPrecomp {
             o4: [Vec4::splat(o.x), Vec4::splat(o.y), Vec4::splat(o.z)],
             s4: [Vec4::splat(s.x), Vec4::splat(s.y)],
             m_shift: Vec4::splat(m_shift),
+            z_above: Vec4::splat(z_above),
+            z_below: Vec4::splat(z_below),
         }
     }
 
@@ -238,9 +265,29 @@ impl TriPack {
 /// those signs as well, and the ray passes outside. Everything else —
 /// the hits, and the rays within rounding of an edge — is decided by
 /// [`intersect`].
+///
+/// With `SEGMENT`, a lane is also dropped when the triangle lies wholly
+/// behind the origin or wholly past the ray's own `t_max` along the
+/// ray's dominant axis (for queries whose `t_max` never shrinks: any-hit
+/// and every-hit), by comparing the least and greatest translated `Z`
+/// with two per-ray bounds. The argument, with `s` the sign of `d_z` and `ε` the
+/// `f32` unit roundoff: a computed `Z = fl(v_z − o32_z)` has the sign of
+/// the exact difference and `|Z| ≤ (1 + ε)` of it, and the `f64` origin
+/// is within `Δo` of the `f32` one, so `Z·s < −Δo(1 + 10⁻⁶)` at every
+/// corner puts every corner strictly behind the `f64` origin. The `f64`
+/// test's translated `Z` then have that sign too (rounding keeps a sign),
+/// its `t` is a sum of products of one sign over a `det` of the other,
+/// so `t ≤ 0 ≤ δt`, which it rejects. Past the end: `Z·s` above
+/// `(t_max·|d_z|(1 + γ₁₆) + Δo)(1 + 10⁻⁶)` at every corner puts every
+/// corner's exact `f64` distance along the axis above `t_max·|d_z|(1 +
+/// γ₁₆)`; the `f64` `t` is a weighted mean of the corners' `sz·Z` (the
+/// weights `u, v, w / det` of one sign) computed with about ten roundings
+/// (three in `sz·Z`, three in the sum, two in `det`, two in `1/det` and
+/// the product), so it is at least `(1 − γ₁₀)` of the least corner's and
+/// exceeds `t_max`, which the test rejects.
 #[must_use]
 #[inline(always)]
-pub(crate) fn candidates(pre: &RayPrecomp, pack: &TriPack) -> u32 {
+pub(crate) fn candidates<const SEGMENT: bool>(pre: &RayPrecomp, pack: &TriPack) -> u32 {
     let [kx, ky, kz] = pre.k;
     let [sx, sy] = pre.s4;
     let o = &pre.o4;
@@ -250,11 +297,11 @@ pub(crate) fn candidates(pre: &RayPrecomp, pack: &TriPack) -> u32 {
         let z = c[kz] - o[kz];
         let m = x.abs() + y.abs() + z.abs() + pre.m_shift;
         let (xs, ys) = (x - sx * z, y - sy * z);
-        (xs, ys, m, xs.abs() + ys.abs())
+        (xs, ys, m, xs.abs() + ys.abs(), z)
     };
-    let (ax, ay, am, an) = shear(&pack.v[0]);
-    let (bx, by, bm, bn) = shear(&pack.v[1]);
-    let (cx, cy, cm, cn) = shear(&pack.v[2]);
+    let (ax, ay, am, an, az) = shear(&pack.v[0]);
+    let (bx, by, bm, bn, bz) = shear(&pack.v[1]);
+    let (cx, cy, cm, cn, cz) = shear(&pack.v[2]);
     let g1 = Vec4::splat(EDGE_PRODUCTS);
     let g2 = Vec4::splat(EDGE_COORDS);
     let g3 = Vec4::splat(EDGE_SECOND);
@@ -273,8 +320,13 @@ pub(crate) fn candidates(pre: &RayPrecomp, pack: &TriPack) -> u32 {
     let (w, ew) = edge(bx, by, bm, bn, ax, ay, am, an);
     let neg = u.cmplt(-eu) | v.cmplt(-ev) | w.cmplt(-ew);
     let pos = u.cmpgt(eu) | v.cmpgt(ev) | w.cmpgt(ew);
-    let outside = (neg & pos).bitmask();
-    !outside & ((1u32 << pack.lanes) - 1)
+    let mut outside = neg & pos;
+    if SEGMENT {
+        let above = az.min(bz).min(cz).cmpgt(pre.z_above);
+        let below = az.max(bz).max(cz).cmplt(pre.z_below);
+        outside |= above | below;
+    }
+    !outside.bitmask() & ((1u32 << pack.lanes) - 1)
 }
 
 /// A hit: distance and the barycentric weights (of v0, v1, v2) as the
@@ -495,7 +547,7 @@ mod tests {
             pack.lanes = 1;
             pack.set(0, tri);
             let accepted = hit_of(&pre, &tri, 0.0, f64::INFINITY).is_some();
-            let lanes = candidates(&pre, &pack);
+            let lanes = candidates::<false>(&pre, &pack);
             assert!(
                 !accepted || lanes & 1 == 1,
                 "case {case}: the filter dropped a hit: {tri:?} {ray:?}"
@@ -503,6 +555,123 @@ mod tests {
             kept += lanes & 1;
         }
         assert!(kept > 0);
+    }
+
+    /// The segment filter (`candidates::<true>`) never drops a triangle
+    /// the `f64` test accepts within `[0, t_max]`, where its distance
+    /// bounds are tightest: triangles nearly square to the ray (every
+    /// corner at almost the hit's distance), `t_max` within a few ulps of
+    /// the hit either way, and origins from 10⁻⁹ to 10⁴ of the triangle's
+    /// size away, on either side of its plane, in `f32` or off it. It
+    /// drops some triangles (those wholly behind or past the segment).
+    #[test]
+    fn the_segment_filter_keeps_every_hit_on_the_segment() {
+        let mut state = 0x0bad_cafe_f00d_d00d_u64;
+        let mut next = move || {
+            state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+            let mut z = state;
+            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+            #[expect(clippy::cast_precision_loss, reason = "53 random bits")]
+            let f = ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64;
+            f
+        };
+        let (mut hits, mut dropped) = (0u32, 0u32);
+        for case in 0..200_000u32 {
+            let scale = 10f64.powf(next() * 8.0 - 3.0);
+            let offset = 10f64.powf(next() * 6.0) * (next() - 0.5);
+            let c = DVec3::new(offset, -offset * 0.6, offset * 0.2);
+            let dir = DVec3::new(next() - 0.5, next() - 0.5, next() - 0.5).normalize();
+            // Two axes across the ray: the triangle is square to it up to
+            // a tilt that is zero in a third of the cases.
+            let a = dir.any_orthonormal_vector();
+            let b = dir.cross(a);
+            let tilt = if case % 3 == 0 {
+                0.0
+            } else {
+                10f64.powf(-next() * 7.0)
+            };
+            let corner = |r: f64, s: f64| {
+                let (r, s) = (r - 0.5, s - 0.5);
+                to_f32(c + (a * r + b * s + dir * (tilt * (r + s))) * scale)
+            };
+            let tri = [
+                corner(next(), next()),
+                corner(next(), next()),
+                corner(next(), next()),
+            ];
+            let v = tri.map(to_f64);
+            // A target inside (weights of one sign) or on an edge.
+            let (w0, w1) = (next(), next());
+            let w = if case % 5 == 0 {
+                [w0, 1.0 - w0, 0.0]
+            } else {
+                [w0, w1, 1.0 + w0 + w1]
+            };
+            let target = (v[0] * w[0] + v[1] * w[1] + v[2] * w[2]) / (w[0] + w[1] + w[2]);
+            // From either side of the plane: a negative distance puts the
+            // origin past the triangle (it lies behind the ray).
+            let dist =
+                10f64.powf(next() * 13.0 - 9.0) * scale * if case % 4 == 1 { -1.0 } else { 1.0 };
+            let origin = target - dir * dist;
+            let origin = if case % 2 == 0 {
+                to_f64(to_f32(origin))
+            } else {
+                origin
+            };
+            let probe = Ray64 {
+                origin,
+                dir,
+                t_min: 0.0,
+                t_max: f64::INFINITY,
+            };
+            let bound = dist.abs() * 4.0 + scale * 4.0;
+            let Some(h) = hit_of(&RayPrecomp::new(&probe, bound), &tri, 0.0, f64::INFINITY) else {
+                // Behind the origin: every such triangle must still be
+                // kept or dropped soundly, which the end checks below
+                // cover; count the drops.
+                let pre = RayPrecomp::new(
+                    &Ray64 {
+                        t_max: 1.0,
+                        ..probe
+                    },
+                    bound,
+                );
+                let mut pack = TriPack::EMPTY;
+                pack.lanes = 1;
+                pack.set(0, tri);
+                dropped += u32::from(candidates::<true>(&pre, &pack) & 1 == 0);
+                continue;
+            };
+            // The segment ends a few ulps of t either side of the hit.
+            let ulps = f64::from(case % 9) - 4.0;
+            let t_max = h.t64 * (1.0 + ulps * f64::EPSILON);
+            let ray = Ray64 { t_max, ..probe };
+            let pre = RayPrecomp::new(&ray, bound);
+            let mut pack = TriPack::EMPTY;
+            pack.lanes = 1;
+            pack.set(0, tri);
+            let accepted = hit_of(&pre, &tri, 0.0, t_max).is_some();
+            let lanes = candidates::<true>(&pre, &pack);
+            assert!(
+                !accepted || lanes & 1 == 1,
+                "case {case}: the segment filter dropped a hit: {tri:?} {ray:?}"
+            );
+            hits += u32::from(accepted);
+            // A segment that ends well before the triangle drops it.
+            let short = Ray64 {
+                t_max: h.t64 * 0.5,
+                ..probe
+            };
+            let pre = RayPrecomp::new(&short, bound);
+            if tilt == 0.0 && h.t64 > 1e-6 * scale {
+                dropped += u32::from(candidates::<true>(&pre, &pack) & 1 == 0);
+            }
+        }
+        assert!(
+            hits > 10_000 && dropped > 10_000,
+            "{hits} hits, {dropped} dropped"
+        );
     }
 
     #[test]
