@@ -157,7 +157,8 @@ fn main() -> Result<()> {
             if rest.iter().any(|a| a == "--build") {
                 profile_build(&scene, k, build, repeats)
             } else {
-                profile(&scene, backend, (k, build), shadowless, repeats)
+                let reuse = rest.iter().any(|a| a == "--reuse");
+                profile(&scene, backend, (k, build), (shadowless, reuse), repeats)
             }
         }
         other => bail!(
@@ -176,12 +177,12 @@ fn profile(
     scene: &Path,
     backend: Backend,
     (subdivide, build): (u32, BvhBuild),
-    shadowless: bool,
+    (shadowless, reuse): (bool, bool),
     repeats: usize,
 ) -> Result<()> {
     let job = Prepared::load(scene, &Overrides::default())?;
     let p = pool(1)?;
-    let times: Vec<f64> = if subdivide == 0 && !shadowless {
+    let times: Vec<f64> = if subdivide == 0 && !shadowless && !reuse {
         (0..repeats.max(1))
             .map(|_| p.install(|| job.render(backend).map(|r| r.time_ms)))
             .collect::<Result<_, _>>()?
@@ -208,16 +209,31 @@ fn profile(
             shadows: !shadowless,
             gate_eps: rendiff::GATE_EPS,
         };
+        let mut frame = rendiff::frame::Frame::new(0, 0, 1, t.background);
+        let mut buffers = rendiff::raster::RasterBuffers::default();
         (0..repeats.max(1))
             .map(|_| {
                 p.install(|| {
                     let start = Instant::now();
-                    match &accel {
-                        Some(a) => {
+                    match (&accel, reuse) {
+                        (Some(a), false) => {
                             std::hint::black_box(rendiff::ray::render(a, &ray_opts));
                         }
-                        None => {
+                        (Some(a), true) => {
+                            std::hint::black_box(rendiff::ray::render_into(
+                                a, &ray_opts, &mut frame,
+                            ));
+                        }
+                        (None, false) => {
                             std::hint::black_box(rendiff::raster::render(&t, &opts));
+                        }
+                        (None, true) => {
+                            std::hint::black_box(rendiff::raster::render_into(
+                                &t,
+                                &opts,
+                                &mut buffers,
+                                &mut frame,
+                            ));
                         }
                     }
                     start.elapsed().as_secs_f64() * 1e3

@@ -199,7 +199,8 @@ fn build_10m(repeats: usize) -> Result<(f64, f64, f64)> {
 }
 
 /// The rasterizer's shaded frame and the ray tracer's (BVH built
-/// beforehand) of the 940 k bunny with its light shadowless, 1 thread, ms.
+/// beforehand) of the 940 k bunny with its light shadowless, 1 thread, ms;
+/// each draws frame after frame into the same memory (`render_into`).
 fn frames(repeats: usize) -> Result<(f64, f64)> {
     let job = Prepared::load(
         Path::new("benches/scenes/bunny_1m.toml"),
@@ -210,8 +211,13 @@ fn frames(repeats: usize) -> Result<(f64, f64)> {
     let mut opts = job.raster_options();
     opts.shadows_needed = false;
     let p = pool(1)?;
+    // Each backend draws frame after frame into the same memory
+    // (`render_into`), as the llvmpipe row's frames do.
+    let frame = std::sync::Mutex::new(rendiff::frame::Frame::new(0, 0, 1, t.background));
+    let buffers = std::sync::Mutex::new(raster::RasterBuffers::default());
     let raster_ms = time_ms(&p, repeats, &|| {
-        std::hint::black_box(raster::render(&t, &opts));
+        let (mut frame, mut buffers) = (frame.lock().unwrap(), buffers.lock().unwrap());
+        std::hint::black_box(raster::render_into(&t, &opts, &mut buffers, &mut frame));
     });
     let accel = Accel::new(&t, AccelOptions::default());
     let ray_opts = rendiff::ray::RayOptions {
@@ -220,7 +226,8 @@ fn frames(repeats: usize) -> Result<(f64, f64)> {
         gate_eps: rendiff::GATE_EPS,
     };
     let ray_ms = time_ms(&p, repeats, &|| {
-        std::hint::black_box(rendiff::ray::render(&accel, &ray_opts));
+        let mut frame = frame.lock().unwrap();
+        std::hint::black_box(rendiff::ray::render_into(&accel, &ray_opts, &mut frame));
     });
     println!(
         "frames, 940 k bunny 1080p, shadowless, 1 thread: raster {raster_ms:.1} ms, ray (BVH prebuilt) {ray_ms:.1} ms"

@@ -683,3 +683,65 @@ fn shadow_map_error_against_shadow_rays_is_measured() {
     }
     eprint!("{report}");
 }
+
+/// Frames drawn into reused memory (`raster::render_into` and
+/// `ray::render_into`, holding the buffers and the frame of the scenes
+/// rendered before: larger and smaller, with and without multisampling)
+/// are the fresh renders bit for bit, stats included: nothing of an
+/// earlier frame survives into a later one.
+#[test]
+fn frames_in_reused_memory_are_the_fresh_frames() {
+    use rendiff::accel::{Accel, AccelOptions};
+    use rendiff::color::Rgb;
+    use rendiff::frame::Frame;
+    // Every field as bits, each led by its length.
+    fn bits(f: &Frame) -> Vec<u32> {
+        let rgb = |v: &[Rgb]| -> Vec<u32> {
+            v.iter()
+                .flat_map(|c| [c.r, c.g, c.b])
+                .map(f32::to_bits)
+                .collect()
+        };
+        let depth: Vec<u32> = f.depth.iter().map(|d| d.to_bits()).collect();
+        let mut out = vec![f.width, f.height, f.samples];
+        for part in [
+            rgb(&f.color),
+            rgb(&f.sample_color),
+            depth,
+            f.id.clone(),
+            f.flags.clone(),
+        ] {
+            out.push(u32::try_from(part.len()).unwrap());
+            out.extend(part);
+        }
+        out
+    }
+    let mut buffers = raster::RasterBuffers::default();
+    let mut frame = Frame::new(0, 0, 1, Rgb::BLACK);
+    let mut ray_frame = Frame::new(0, 0, 1, Rgb::BLACK);
+    // 2×2 samples, then one, then a wider background, then 2×2 again.
+    for name in ["dense", "polygons", "spheres", "dense"] {
+        let job = crate::util::load(name, &rendiff::Overrides::default());
+        let opts = job.raster_options();
+        let (fresh, fresh_stats) = raster::render(&job.tri, &opts);
+        let stats = raster::render_into(&job.tri, &opts, &mut buffers, &mut frame);
+        assert_eq!(stats, fresh_stats, "{name}: raster stats");
+        assert!(
+            bits(&frame) == bits(&fresh),
+            "{name}: the raster frame differs"
+        );
+        let accel = Accel::new(&job.tri, AccelOptions::default());
+        let ray_opts = rendiff::ray::RayOptions {
+            max_depth: job.settings.max_depth,
+            shadows: true,
+            gate_eps: rendiff::GATE_EPS,
+        };
+        let (fresh, fresh_stats) = rendiff::ray::render_counted(&accel, &ray_opts);
+        let stats = rendiff::ray::render_into(&accel, &ray_opts, &mut ray_frame);
+        assert_eq!(stats, fresh_stats, "{name}: ray stats");
+        assert!(
+            bits(&ray_frame) == bits(&fresh),
+            "{name}: the ray frame differs"
+        );
+    }
+}

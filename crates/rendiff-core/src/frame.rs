@@ -179,6 +179,35 @@ impl Frame {
         }
     }
 
+    /// Makes this frame the empty (background) frame [`Frame::new`] makes,
+    /// equal to it field for field, in the memory it already holds where
+    /// that is large enough: a renderer that draws frame after frame into
+    /// one `Frame` touches no fresh memory after the first (fresh pages
+    /// must be zeroed by the kernel, which costs more than writing them).
+    pub fn reset(&mut self, width: u32, height: u32, samples: u32, background: Rgb) {
+        let n = (width as usize) * (height as usize);
+        let ns = n * (samples as usize) * (samples as usize);
+        self.width = width;
+        self.height = height;
+        self.samples = samples;
+        let refill = |v: &mut Vec<_>, len, value| {
+            v.clear();
+            v.resize(len, value);
+        };
+        refill(&mut self.color, n, background);
+        refill(
+            &mut self.sample_color,
+            if samples == 1 { 0 } else { ns },
+            background,
+        );
+        self.depth.clear();
+        self.depth.resize(ns, f32::INFINITY);
+        self.id.clear();
+        self.id.resize(ns, BACKGROUND);
+        self.flags.clear();
+        self.flags.resize(ns, 0);
+    }
+
     /// Width of the sample grid.
     #[must_use]
     pub fn sample_width(&self) -> u32 {

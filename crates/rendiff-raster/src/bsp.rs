@@ -792,7 +792,8 @@ pub fn render(
     held.grow_to(held.reserved + samples * 4, bsp.pieces)?;
     let vis = visibility_with(scene, opts, &Rule::Pieces(&pieces));
     let mut stats = vis.stats;
-    let (frame, shadow_rays, shadow_maps) = shade_pass(scene, opts, &vis);
+    let mut frame = Frame::new(0, 0, 1, scene.background);
+    let (shadow_rays, shadow_maps) = shade_pass(scene, opts, &vis.id, &mut frame);
     stats.shadow_bvh =
         opts.shadows_needed && opts.shadows == rendiff_core::options::ShadowMode::Rays;
     stats.shadow_rays = shadow_rays;

@@ -249,13 +249,38 @@ impl DepthMap {
 /// Renders a scene.
 #[must_use]
 pub fn render(scene: &TriScene, opts: &RasterOptions) -> (Frame, RasterStats) {
-    let vis = visibility(scene, opts);
-    let mut stats = vis.stats;
-    let (frame, shadow_rays, shadow_maps) = shade_pass(scene, opts, &vis);
+    let mut frame = Frame::new(0, 0, 1, scene.background);
+    let stats = render_into(scene, opts, &mut RasterBuffers::default(), &mut frame);
+    (frame, stats)
+}
+
+/// The working buffers of the rasterizer that outlive a frame when the
+/// caller keeps them ([`render_into`]): the projected vertices and the
+/// visibility pass's depth keys and triangle ids.
+#[derive(Debug, Default)]
+pub struct RasterBuffers {
+    projected: Projected,
+    key: Vec<u32>,
+    id: Vec<u32>,
+}
+
+/// Renders a scene into `frame` (made the scene's size), in the memory of
+/// `frame` and `buffers` from an earlier call where it is large enough:
+/// the frame [`render`] returns, bit for bit, without the fresh memory a
+/// frame costs (measured on the 940 k bunny at 1080p in
+/// benches/README.md). For a caller that renders frame after frame.
+pub fn render_into(
+    scene: &TriScene,
+    opts: &RasterOptions,
+    buffers: &mut RasterBuffers,
+    frame: &mut Frame,
+) -> RasterStats {
+    let mut stats = visibility_into(scene, opts, &Rule::ZBuffer, buffers);
+    let (shadow_rays, shadow_maps) = shade_pass(scene, opts, &buffers.id, frame);
     stats.shadow_bvh = opts.shadows_needed && opts.shadows == ShadowMode::Rays;
     stats.shadow_rays = shadow_rays;
     stats.shadow_maps = shadow_maps;
-    (frame, stats)
+    stats
 }
 
 /// The scene's vertices in homogeneous screen space, and the screen
@@ -263,6 +288,7 @@ pub fn render(scene: &TriScene, opts: &RasterOptions) -> (Frame, RasterStats) {
 /// vertex is a corner of about six triangles, and the clip test and the
 /// setup of each asked for its two divisions). It derefs to the
 /// homogeneous vertices, which the plane set-up and the BSP read alone.
+#[derive(Debug, Default)]
 struct Projected {
     hv: Vec<HVert>,
     screen: Vec<(f64, f64)>,
@@ -277,41 +303,51 @@ impl std::ops::Deref for Projected {
 }
 
 fn homogeneous(scene: &TriScene, perturb: Perturb) -> Projected {
-    let hv = homogeneous_vertices(scene, perturb);
-    let screen = hv.par_iter().map(HVert::screen).collect();
-    Projected { hv, screen }
+    let mut p = Projected::default();
+    p.fill(scene, perturb);
+    p
 }
 
-fn homogeneous_vertices(scene: &TriScene, perturb: Perturb) -> Vec<HVert> {
+impl Projected {
+    /// The projection of `scene`'s vertices, in this one's memory.
+    fn fill(&mut self, scene: &TriScene, perturb: Perturb) {
+        self.hv.clear();
+        self.hv.par_extend(homogeneous_vertices(scene, perturb));
+        self.screen.clear();
+        self.screen
+            .par_extend(self.hv.par_iter().map(HVert::screen));
+    }
+}
+
+fn homogeneous_vertices(
+    scene: &TriScene,
+    perturb: Perturb,
+) -> impl IndexedParallelIterator<Item = HVert> + '_ {
     let cam = &scene.camera;
     let (w, h) = (f64::from(cam.width()), f64::from(cam.height()));
     let a = cam.aspect();
     let off = perturb.offset_px;
-    scene
-        .positions
-        .par_iter()
-        .map(|p| {
-            let DVec3 {
-                x: xc,
-                y: yc,
+    scene.positions.par_iter().map(move |p| {
+        let DVec3 {
+            x: xc,
+            y: yc,
+            z: zc,
+        } = cam.to_view(to_f64(*p));
+        match cam.projection() {
+            Projection::Perspective { tan_half_fov: t } => HVert {
+                xh: (xc / (t * a) + zc) * w / 2.0 + off * zc,
+                yh: (zc - yc / t) * h / 2.0 + off * zc,
+                w: zc,
                 z: zc,
-            } = cam.to_view(to_f64(*p));
-            match cam.projection() {
-                Projection::Perspective { tan_half_fov: t } => HVert {
-                    xh: (xc / (t * a) + zc) * w / 2.0 + off * zc,
-                    yh: (zc - yc / t) * h / 2.0 + off * zc,
-                    w: zc,
-                    z: zc,
-                },
-                Projection::Orthographic { view_height: vh } => HVert {
-                    xh: (xc / (vh * a / 2.0) + 1.0) * w / 2.0 + off,
-                    yh: (1.0 - yc / (vh / 2.0)) * h / 2.0 + off,
-                    w: 1.0,
-                    z: zc,
-                },
-            }
-        })
-        .collect()
+            },
+            Projection::Orthographic { view_height: vh } => HVert {
+                xh: (xc / (vh * a / 2.0) + 1.0) * w / 2.0 + off,
+                yh: (1.0 - yc / (vh / 2.0)) * h / 2.0 + off,
+                w: 1.0,
+                z: zc,
+            },
+        }
+    })
 }
 
 /// The visibility pass alone: depth keys, ids and barycentrics per sample.
@@ -341,11 +377,28 @@ pub(crate) fn visibility_with(
     opts: &RasterOptions,
     rule: &Rule<'_>,
 ) -> VisibilityBuffers {
+    let mut buffers = RasterBuffers::default();
+    let stats = visibility_into(scene, opts, rule, &mut buffers);
+    VisibilityBuffers {
+        key: buffers.key,
+        id: buffers.id,
+        stats,
+    }
+}
+
+/// [`visibility_with`] into `buffers` (its keys and ids end there).
+fn visibility_into(
+    scene: &TriScene,
+    opts: &RasterOptions,
+    rule: &Rule<'_>,
+    buffers: &mut RasterBuffers,
+) -> RasterStats {
     let cam = &scene.camera;
     let n = cam.samples();
     let grid = SampleGrid::new(n);
     let (sw, sh) = (cam.sample_width(), cam.sample_height());
-    let hv = homogeneous(scene, opts.perturbation());
+    buffers.projected.fill(scene, opts.perturbation());
+    let hv = &buffers.projected;
     let perspective = matches!(cam.projection(), Projection::Perspective { .. });
 
     // Setup: per chunk of triangles, in id order.
@@ -356,7 +409,7 @@ pub(crate) fn visibility_with(
         .map(|c| {
             records(
                 scene,
-                &hv,
+                hv,
                 c * chunk..((c + 1) * chunk).min(n_tris),
                 &grid,
                 opts.perturbation().fill_rule,
@@ -401,8 +454,11 @@ pub(crate) fn visibility_with(
     }
 
     let total = (sw as usize) * (sh as usize);
-    let mut key = vec![u32::MAX; total];
-    let mut id = vec![BACKGROUND; total];
+    let (key, id) = (&mut buffers.key, &mut buffers.id);
+    key.clear();
+    key.resize(total, u32::MAX);
+    id.clear();
+    id.resize(total, BACKGROUND);
     let depth_map = DepthMap {
         format: opts.depth,
         perspective,
@@ -411,7 +467,7 @@ pub(crate) fn visibility_with(
     };
     let walk = Walk {
         scene,
-        hv: &hv,
+        hv,
         grid: &grid,
         sw,
         perspective,
@@ -458,7 +514,7 @@ pub(crate) fn visibility_with(
             (writes, frags)
         })
         .collect();
-    let stats = RasterStats {
+    RasterStats {
         triangles: n_tris,
         records: records.len(),
         depth_writes: counters.iter().map(|c| c.0).sum(),
@@ -467,8 +523,7 @@ pub(crate) fn visibility_with(
         shadow_bvh: false,
         shadow_rays: 0,
         shadow_maps: 0,
-    };
-    VisibilityBuffers { key, id, stats }
+    }
 }
 
 /// What the near, far and guard planes leave of a triangle.
@@ -983,11 +1038,15 @@ pub fn measure_drift(scene: &TriScene) -> Drift {
 
 /// The deferred shading pass; returns the frame, the shadow rays cast and
 /// the shadow maps built.
+/// Shades the visible samples (`ids`, the visibility pass's) into `frame`,
+/// reset to the scene's empty frame first; returns the shadow rays cast
+/// and the shadow maps made.
 fn shade_pass(
     scene: &TriScene,
     opts: &RasterOptions,
-    vis: &VisibilityBuffers,
-) -> (Frame, u64, usize) {
+    ids: &[u32],
+    frame: &mut Frame,
+) -> (u64, usize) {
     let cam = &scene.camera;
     let sw = cam.sample_width();
     let ctx = scene.shade_context(opts.gate_eps, opts.shadows_needed);
@@ -996,12 +1055,12 @@ fn shade_pass(
     // shared), built by the rule of `BvhBuild::for_rays` for at most one
     // ray per visible sample and shadow-casting light; or the shadow maps.
     let accel = (opts.shadows_needed && opts.shadows == ShadowMode::Rays)
-        .then(|| Accel::new(scene, shadow_accel_options(scene, &vis.id)));
+        .then(|| Accel::new(scene, shadow_accel_options(scene, ids)));
     let map = match (opts.shadows_needed, opts.shadows) {
         (true, ShadowMode::Map(res)) => Some(shadow_map::ShadowMaps::new(scene, res)),
         _ => None,
     };
-    let mut frame = Frame::new(cam.width(), cam.height(), cam.samples(), scene.background);
+    frame.reset(cam.width(), cam.height(), cam.samples(), scene.background);
     let cam_rays = SampleRays::new(cam);
     let w = sw as usize;
     let shadow_rays: u64 = frame
@@ -1020,7 +1079,7 @@ fn shade_pass(
             let mut batch = ShadeBatch::default();
             for sx in 0..sw {
                 let i = (sy as usize) * w + sx as usize;
-                let tri = vis.id[i];
+                let tri = ids[i];
                 if tri == BACKGROUND {
                     continue;
                 }
@@ -1049,7 +1108,7 @@ fn shade_pass(
         .sum();
     frame.resolve();
     let maps = map.as_ref().map_or(0, shadow_map::ShadowMaps::count);
-    (frame, shadow_rays, maps)
+    (shadow_rays, maps)
 }
 
 /// The options of a shadow BVH for a frame whose samples show the

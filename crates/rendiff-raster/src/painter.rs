@@ -474,7 +474,8 @@ pub fn render(
     let (rank, pstats) = order(scene, opts, sort, budget)?;
     let vis = visibility_with(scene, opts, &Rule::Painter(&rank));
     let mut stats = vis.stats;
-    let (frame, shadow_rays, shadow_maps) = shade_pass(scene, opts, &vis);
+    let mut frame = Frame::new(0, 0, 1, scene.background);
+    let (shadow_rays, shadow_maps) = shade_pass(scene, opts, &vis.id, &mut frame);
     stats.shadow_bvh =
         opts.shadows_needed && opts.shadows == rendiff_core::options::ShadowMode::Rays;
     stats.shadow_rays = shadow_rays;

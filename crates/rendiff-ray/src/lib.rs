@@ -206,8 +206,17 @@ pub fn render(accel: &Accel<'_>, opts: &RayOptions) -> Frame {
 /// Renders a scene and counts the rays cast.
 #[must_use]
 pub fn render_counted(accel: &Accel<'_>, opts: &RayOptions) -> (Frame, RayStats) {
-    let (frame, stats, _) = render_with(accel, opts, None);
+    let mut frame = Frame::new(0, 0, 1, accel.scene().background);
+    let stats = render_into(accel, opts, &mut frame);
     (frame, stats)
+}
+
+/// [`render_counted`] into `frame` (made the scene's size), in the memory
+/// it holds from an earlier frame where that is large enough: the same
+/// frame bit for bit, without the fresh memory a frame costs. For a
+/// caller that renders frame after frame.
+pub fn render_into(accel: &Accel<'_>, opts: &RayOptions, frame: &mut Frame) -> RayStats {
+    render_with(accel, opts, None, frame).0
 }
 
 /// Renders a scene hitting the given faces, and counts the rays cast and
@@ -218,14 +227,17 @@ pub fn render_faces(
     opts: &RayOptions,
     faces: Faces,
 ) -> (Frame, RayStats, CullStats) {
-    render_with(accel, opts, Some(faces))
+    let mut frame = Frame::new(0, 0, 1, accel.scene().background);
+    let (stats, cull) = render_with(accel, opts, Some(faces), &mut frame);
+    (frame, stats, cull)
 }
 
 fn render_with(
     accel: &Accel<'_>,
     opts: &RayOptions,
     faces: Option<Faces>,
-) -> (Frame, RayStats, CullStats) {
+    frame: &mut Frame,
+) -> (RayStats, CullStats) {
     let scene = accel.scene();
     let cam = &scene.camera;
     let ctx = scene.shade_context(opts.gate_eps, opts.shadows);
@@ -258,7 +270,7 @@ fn render_with(
     let sw = cam.sample_width();
     // Bands of TILE sample rows, each traced in TILE×TILE tiles (coherent
     // rays), written straight into the frame's rows.
-    let mut frame = Frame::new(cam.width(), cam.height(), cam.samples(), scene.background);
+    frame.reset(cam.width(), cam.height(), cam.samples(), scene.background);
     let stats = frame
         .par_bands(TILE, |band| {
             let mut w = Worker {
@@ -354,7 +366,7 @@ fn render_with(
             (a.0 + b.0, a.1 + b.1)
         });
     frame.resolve();
-    (frame, stats.0, stats.1)
+    stats
 }
 
 impl Tracer<'_, '_> {
