@@ -7,7 +7,7 @@
 //! rendiff-peers llvmpipe [--repeats N]
 //! rendiff-peers objload [--repeats N]
 //! rendiff-peers trees [SCENE.toml] [--subdivide K] [--repeats N]
-//! rendiff-peers profile SCENE.toml [--backend raster|ray] [--subdivide K] [--shadowless] [--build] [--repeats N]
+//! rendiff-peers profile SCENE.toml [--backend raster|ray] [--subdivide K] [--shadowless] [--reuse] [--build] [--repeats N]
 //! ```
 //!
 //! `trees`: the BVH built by the SAH and in Morton order over the same
@@ -22,7 +22,9 @@
 //! against. `--subdivide K` splits every triangle K times into four and
 //! `--shadowless` makes every light shadowless, as the summary's frames
 //! of the 940 k bunny (the ray tracer then traces a BVH built once);
-//! `--build` times the BVH build alone. `--morton` (here and with
+//! `--reuse` takes that path too (a BVH built once) and draws every frame
+//! into the memory of the one before (`render_into`), as the summary's
+//! frames do; `--build` times the BVH build alone. `--morton` (here and with
 //! `embree`) builds our BVH in Morton order instead of by the SAH.
 //!
 //! `summary` (what `make peers` runs): every comparison below plus the
@@ -113,7 +115,7 @@ fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let Some(cmd) = args.first() else {
         bail!(
-            "usage: rendiff-peers summary [--repeats N] | trees [SCENE] [--subdivide K] [--repeats N] | embree [SCENE] [--subdivide K] [--morton] [--repeats N] | povray [SCENE...] [--threads 1,2] [--repeats N] | llvmpipe [--repeats N] | objload [--repeats N] | profile SCENE [--backend raster|ray] [--subdivide K] [--shadowless] [--build] [--repeats N]"
+            "usage: rendiff-peers summary [--repeats N] | trees [SCENE] [--subdivide K] [--repeats N] | embree [SCENE] [--subdivide K] [--morton] [--repeats N] | povray [SCENE...] [--threads 1,2] [--repeats N] | llvmpipe [--repeats N] | objload [--repeats N] | profile SCENE [--backend raster|ray] [--subdivide K] [--shadowless] [--reuse] [--build] [--repeats N]"
         );
     };
     let rest = &args[1..];
@@ -170,9 +172,10 @@ fn main() -> Result<()> {
 /// Renders one scene `repeats` times on one thread and prints the
 /// median, minimum and maximum of the render phase. Plain, it times
 /// `Prepared::render` (the ray tracer's BVH build included, as the
-/// POV-Ray rows time it); split (`subdivide` > 0) or shadowless, it
-/// times the frames of the summary (`raster::render`, or `ray::render` on
-/// a BVH built once).
+/// POV-Ray rows time it); split (`subdivide` > 0), shadowless or with
+/// `reuse`, it times the frames of the summary (`raster::render`, or
+/// `ray::render` on a BVH built once; with `reuse`, their `render_into`,
+/// each frame in the memory of the one before).
 fn profile(
     scene: &Path,
     backend: Backend,

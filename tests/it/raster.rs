@@ -686,7 +686,8 @@ fn shadow_map_error_against_shadow_rays_is_measured() {
 
 /// Frames drawn into reused memory (`raster::render_into` and
 /// `ray::render_into`, holding the buffers and the frame of the scenes
-/// rendered before: larger and smaller, with and without multisampling)
+/// rendered before: larger and smaller, wider and narrower, with and
+/// without multisampling)
 /// are the fresh renders bit for bit, stats included: nothing of an
 /// earlier frame survives into a later one.
 #[test]
@@ -719,9 +720,19 @@ fn frames_in_reused_memory_are_the_fresh_frames() {
     let mut buffers = raster::RasterBuffers::default();
     let mut frame = Frame::new(0, 0, 1, Rgb::BLACK);
     let mut ray_frame = Frame::new(0, 0, 1, Rgb::BLACK);
-    // 2×2 samples, then one, then a wider background, then 2×2 again.
-    for name in ["dense", "polygons", "spheres", "dense"] {
-        let job = crate::util::load(name, &rendiff::Overrides::default());
+    // 320×240 at 2×2 samples, then 160×120 at one, then 400×300 (wider
+    // and taller) at one, then 320×240 at 2×2 again; the backgrounds differ.
+    for (name, size) in [
+        ("dense", None),
+        ("polygons", Some((160, 120))),
+        ("spheres", Some((400, 300))),
+        ("dense", None),
+    ] {
+        let ov = rendiff::Overrides {
+            size,
+            ..rendiff::Overrides::default()
+        };
+        let job = crate::util::load(name, &ov);
         let opts = job.raster_options();
         let (fresh, fresh_stats) = raster::render(&job.tri, &opts);
         let stats = raster::render_into(&job.tri, &opts, &mut buffers, &mut frame);

@@ -974,6 +974,8 @@ impl Bvh {
         t_max: &mut f64,
         mut hit: impl FnMut(u32, TriHit, &mut f64) -> bool,
     ) -> bool {
+        // The segment bounds of the filter were formed from this `t_max`.
+        let t_fixed = *t_max;
         let mut p = first;
         loop {
             let pack = &self.packs[p];
@@ -986,10 +988,15 @@ impl Bvh {
                     continue;
                 }
                 let s = *shear.get_or_insert_with(|| pre.shear64());
-                if let Some(h) = intersect(pre, s, &pack.triangle(lane), t_min, *t_max)
-                    && hit(id, h, t_max)
-                {
-                    return true;
+                if let Some(h) = intersect(pre, s, &pack.triangle(lane), t_min, *t_max) {
+                    let stop = hit(id, h, t_max);
+                    debug_assert!(
+                        !SEGMENT || t_max.to_bits() == t_fixed.to_bits(),
+                        "a segment walk's t_max must stay the ray's own"
+                    );
+                    if stop {
+                        return true;
+                    }
                 }
             }
             if pack.last {

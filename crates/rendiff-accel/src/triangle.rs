@@ -188,8 +188,9 @@ impl RayPrecomp {
             f32_at_least(beyond)
         };
         // Along +z: behind is `Z < −z_behind`, past the end `Z > z_beyond`;
-        // along −z the two swap sides.
-        let (z_above, z_below) = if d[kz] < 0.0 {
+        // along −z the two swap sides. The side is the `f64` direction's
+        // (its `f32` copy can round to −0 or +0 where it is below 10⁻⁴⁵).
+        let (z_above, z_below) = if ray.dir[kz] < 0.0 {
             (z_behind, -z_beyond)
         } else {
             (z_beyond, -z_behind)
@@ -284,7 +285,10 @@ impl TriPack {
 /// weights `u, v, w / det` of one sign) computed with about ten roundings
 /// (three in `sz·Z`, three in the sum, two in `det`, two in `1/det` and
 /// the product), so it is at least `(1 − γ₁₀)` of the least corner's and
-/// exceeds `t_max`, which the test rejects.
+/// exceeds `t_max`, which the test rejects. (As every error bound of the
+/// `f64` test, this one assumes no product underflows: edge functions
+/// below 10⁻³⁰⁰, which coordinates that come from `f32` scenes never
+/// reach.)
 #[must_use]
 #[inline(always)]
 pub(crate) fn candidates<const SEGMENT: bool>(pre: &RayPrecomp, pack: &TriPack) -> u32 {
@@ -559,11 +563,23 @@ mod tests {
 
     /// The segment filter (`candidates::<true>`) never drops a triangle
     /// the `f64` test accepts within `[0, t_max]`, where its distance
-    /// bounds are tightest: triangles nearly square to the ray (every
-    /// corner at almost the hit's distance), `t_max` within a few ulps of
-    /// the hit either way, and origins from 10⁻⁹ to 10⁴ of the triangle's
-    /// size away, on either side of its plane, in `f32` or off it. It
-    /// drops some triangles (those wholly behind or past the segment).
+    /// bounds are tightest: `t_max` within a few ulps of the hit either
+    /// way, triangles square to the ray, and triangles whose three corners
+    /// share one `f32` coordinate on the ray's dominant axis (every corner
+    /// at the hit's distance along it, so only the bounds' margins keep
+    /// them), with targets inside, on edges and next to corners, and
+    /// origins from 10⁻⁹ to 10⁴ of the triangle's size away on either side
+    /// of it, in `f32` (no drift) or off it. It also drops every triangle
+    /// that lies clearly behind the origin or past `t_max`.
+    ///
+    /// It holds the drift term of the far bound (it fails without it). The
+    /// relative margins (10⁻⁶, γ₁₆) guard roundings that random cases do
+    /// not reach: the bound is rounded up to an `f32` and the corners' `Z`
+    /// to the nearest, so they matter only where a corner's exact `Z` lies
+    /// within about 10⁻¹⁵ above an `f32` step; and the near bound's drift
+    /// term guards the `f32` rounding of the subtraction alone, since the
+    /// `f32` origin's own coordinate on the axis cannot pass an `f32`
+    /// corner coordinate that the `f64` origin has not.
     #[test]
     fn the_segment_filter_keeps_every_hit_on_the_segment() {
         let mut state = 0x0bad_cafe_f00d_d00d_u64;
@@ -576,43 +592,57 @@ mod tests {
             let f = ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64;
             f
         };
-        let (mut hits, mut dropped) = (0u32, 0u32);
-        for case in 0..200_000u32 {
+        let one_pack = |tri: [Vec3; 3]| {
+            let mut pack = TriPack::EMPTY;
+            pack.lanes = 1;
+            pack.set(0, tri);
+            pack
+        };
+        let (mut hits, mut at_the_end, mut dropped) = (0u32, 0u32, 0u32);
+        for case in 0..300_000u32 {
             let scale = 10f64.powf(next() * 8.0 - 3.0);
             let offset = 10f64.powf(next() * 6.0) * (next() - 0.5);
             let c = DVec3::new(offset, -offset * 0.6, offset * 0.2);
             let dir = DVec3::new(next() - 0.5, next() - 0.5, next() - 0.5).normalize();
-            // Two axes across the ray: the triangle is square to it up to
-            // a tilt that is zero in a third of the cases.
-            let a = dir.any_orthonormal_vector();
-            let b = dir.cross(a);
-            let tilt = if case % 3 == 0 {
-                0.0
+            let kz = dir.abs().max_position();
+            let tri = if case % 3 == 2 {
+                // Square to the dominant axis: one shared f32 coordinate.
+                let z = to_f32(c)[kz];
+                let mut corner = || {
+                    let mut p =
+                        to_f32(c + DVec3::new(next() - 0.5, next() - 0.5, next() - 0.5) * scale);
+                    p[kz] = z;
+                    p
+                };
+                [corner(), corner(), corner()]
             } else {
-                10f64.powf(-next() * 7.0)
+                // Square to the ray, up to a tilt that is zero in half the cases.
+                let a = dir.any_orthonormal_vector();
+                let b = dir.cross(a);
+                let tilt = if case % 3 == 0 {
+                    0.0
+                } else {
+                    10f64.powf(-next() * 7.0)
+                };
+                let mut corner = || {
+                    let (r, s) = (next() - 0.5, next() - 0.5);
+                    to_f32(c + (a * r + b * s + dir * (tilt * (r + s))) * scale)
+                };
+                [corner(), corner(), corner()]
             };
-            let corner = |r: f64, s: f64| {
-                let (r, s) = (r - 0.5, s - 0.5);
-                to_f32(c + (a * r + b * s + dir * (tilt * (r + s))) * scale)
-            };
-            let tri = [
-                corner(next(), next()),
-                corner(next(), next()),
-                corner(next(), next()),
-            ];
             let v = tri.map(to_f64);
-            // A target inside (weights of one sign) or on an edge.
+            // A target inside, on an edge, or within 10⁻⁶ of a corner.
             let (w0, w1) = (next(), next());
-            let w = if case % 5 == 0 {
-                [w0, 1.0 - w0, 0.0]
-            } else {
-                [w0, w1, 1.0 + w0 + w1]
+            let w = match case % 5 {
+                0 => [w0, 1.0 - w0, 0.0],
+                1 => [1.0, w0 * 1e-6, w1 * 1e-6],
+                _ => [w0, w1, next()],
             };
             let target = (v[0] * w[0] + v[1] * w[1] + v[2] * w[2]) / (w[0] + w[1] + w[2]);
-            // From either side of the plane: a negative distance puts the
-            // origin past the triangle (it lies behind the ray).
-            let dist =
-                10f64.powf(next() * 13.0 - 9.0) * scale * if case % 4 == 1 { -1.0 } else { 1.0 };
+            // From either side: a negative distance puts the origin past
+            // the triangle (which then lies behind the ray).
+            let side = if case % 4 == 1 { -1.0 } else { 1.0 };
+            let dist = 10f64.powf(next() * 13.0 - 9.0) * scale * side;
             let origin = target - dir * dist;
             let origin = if case % 2 == 0 {
                 to_f64(to_f32(origin))
@@ -626,10 +656,21 @@ mod tests {
                 t_max: f64::INFINITY,
             };
             let bound = dist.abs() * 4.0 + scale * 4.0;
-            let Some(h) = hit_of(&RayPrecomp::new(&probe, bound), &tri, 0.0, f64::INFINITY) else {
-                // Behind the origin: every such triangle must still be
-                // kept or dropped soundly, which the end checks below
-                // cover; count the drops.
+            let pack = one_pack(tri);
+            // Where the corners lie along the dominant axis, in units of t,
+            // and a margin far above every rounding the bounds cover.
+            let along = v.map(|p| (p[kz] - origin[kz]) / dir[kz]);
+            let (near, far) = (
+                along.iter().copied().fold(f64::INFINITY, f64::min),
+                along.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+            );
+            // (The bounds carry the drift of the origin's largest
+            // coordinate, on any axis.)
+            let largest = v.iter().fold(origin.abs().max_element(), |m, p| {
+                m.max(p.abs().max_element())
+            });
+            let clear = 1e-4 * largest / dir[kz].abs();
+            if far < -clear {
                 let pre = RayPrecomp::new(
                     &Ray64 {
                         t_max: 1.0,
@@ -637,10 +678,14 @@ mod tests {
                     },
                     bound,
                 );
-                let mut pack = TriPack::EMPTY;
-                pack.lanes = 1;
-                pack.set(0, tri);
-                dropped += u32::from(candidates::<true>(&pre, &pack) & 1 == 0);
+                assert_eq!(
+                    candidates::<true>(&pre, &pack),
+                    0,
+                    "case {case}: kept a triangle behind the origin"
+                );
+                dropped += 1;
+            }
+            let Some(h) = hit_of(&RayPrecomp::new(&probe, bound), &tri, 0.0, f64::INFINITY) else {
                 continue;
             };
             // The segment ends a few ulps of t either side of the hit.
@@ -648,29 +693,31 @@ mod tests {
             let t_max = h.t64 * (1.0 + ulps * f64::EPSILON);
             let ray = Ray64 { t_max, ..probe };
             let pre = RayPrecomp::new(&ray, bound);
-            let mut pack = TriPack::EMPTY;
-            pack.lanes = 1;
-            pack.set(0, tri);
             let accepted = hit_of(&pre, &tri, 0.0, t_max).is_some();
-            let lanes = candidates::<true>(&pre, &pack);
             assert!(
-                !accepted || lanes & 1 == 1,
+                !accepted || candidates::<true>(&pre, &pack) & 1 == 1,
                 "case {case}: the segment filter dropped a hit: {tri:?} {ray:?}"
             );
             hits += u32::from(accepted);
-            // A segment that ends well before the triangle drops it.
+            at_the_end += u32::from(accepted && (near - h.t64).abs() <= 1e-6 * h.t64);
+            // A segment that ends clearly before the triangle drops it.
             let short = Ray64 {
-                t_max: h.t64 * 0.5,
+                t_max: (near - clear) * 0.5,
                 ..probe
             };
-            let pre = RayPrecomp::new(&short, bound);
-            if tilt == 0.0 && h.t64 > 1e-6 * scale {
-                dropped += u32::from(candidates::<true>(&pre, &pack) & 1 == 0);
+            if short.t_max > 0.0 {
+                let pre = RayPrecomp::new(&short, bound);
+                assert_eq!(
+                    candidates::<true>(&pre, &pack),
+                    0,
+                    "case {case}: kept a triangle past t_max"
+                );
+                dropped += 1;
             }
         }
         assert!(
-            hits > 10_000 && dropped > 10_000,
-            "{hits} hits, {dropped} dropped"
+            hits > 50_000 && at_the_end > 10_000 && dropped > 10_000,
+            "{hits} hits, {at_the_end} at the segment's end, {dropped} dropped"
         );
     }
 

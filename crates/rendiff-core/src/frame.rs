@@ -190,22 +190,15 @@ impl Frame {
         self.width = width;
         self.height = height;
         self.samples = samples;
-        let refill = |v: &mut Vec<_>, len, value| {
-            v.clear();
-            v.resize(len, value);
-        };
         refill(&mut self.color, n, background);
         refill(
             &mut self.sample_color,
             if samples == 1 { 0 } else { ns },
             background,
         );
-        self.depth.clear();
-        self.depth.resize(ns, f32::INFINITY);
-        self.id.clear();
-        self.id.resize(ns, BACKGROUND);
-        self.flags.clear();
-        self.flags.resize(ns, 0);
+        refill(&mut self.depth, ns, f32::INFINITY);
+        refill(&mut self.id, ns, BACKGROUND);
+        refill(&mut self.flags, ns, 0);
     }
 
     /// Width of the sample grid.
@@ -315,3 +308,15 @@ impl Frame {
 /// colours (16-bit linear) — the folder `rendiff diff --b DIR` reads as
 /// another renderer's G-buffer.
 pub const GBUFFER_FILES: [&str; 4] = ["depth.pfm", "id.png", "flags.png", "color.png"];
+
+/// `v` made `len` copies of `value`: in its own memory where that is large
+/// enough, else in a new vector (`vec!`, which takes zeros straight from
+/// the allocator's zeroed pages instead of writing them).
+fn refill<T: Clone>(v: &mut Vec<T>, len: usize, value: T) {
+    if v.capacity() < len {
+        *v = vec![value; len];
+    } else {
+        v.clear();
+        v.resize(len, value);
+    }
+}
