@@ -536,27 +536,29 @@ impl ShadowBatch {
             }
             return;
         }
-        self.order.clear();
-        self.order.extend(0..queries.len());
-        self.order.sort_by_key(|&k| queries[k].light);
-        let mut start = 0;
-        while start < self.order.len() {
-            let light = queries[self.order[start]].light;
-            let end = start
-                + self.order[start..]
-                    .iter()
-                    .take_while(|&&k| queries[k].light == light)
-                    .count();
+        // Light by light in increasing order, each light's queries in the
+        // samples' order (a stable sort by light, in one pass per light:
+        // a batch holds a few lights, and a sort of its indices cost more).
+        let mut light = queries.iter().map(|q| q.light).min();
+        while let Some(l) = light {
+            self.order.clear();
             self.group.clear();
-            self.group
-                .extend(self.order[start..end].iter().map(|&k| queries[k]));
+            let mut next = None::<usize>;
+            for (k, q) in queries.iter().enumerate() {
+                if q.light == l {
+                    self.order.push(k);
+                    self.group.push(*q);
+                } else if q.light > l && next.is_none_or(|n| q.light < n) {
+                    next = Some(q.light);
+                }
+            }
             self.group_answers.clear();
             self.group_answers.resize(self.group.len(), Rgb::WHITE);
             rays.transmittance_packets(&self.group, &mut self.group_answers);
-            for (&k, &t) in self.order[start..end].iter().zip(&self.group_answers) {
+            for (&k, &t) in self.order.iter().zip(&self.group_answers) {
                 answers[k].1 = t;
             }
-            start = end;
+            light = next;
         }
     }
 
