@@ -1329,8 +1329,8 @@ impl Bvh {
                     let r = m.trailing_zeros() as usize;
                     m &= m - 1;
                     let ray = ray_of(r);
-                    let (pre, shear) =
-                        pres[r].get_or_insert_with(|| (RayPrecomp::of(ray, &walks[r]), None));
+                    let (pre, shear) = pres[r]
+                        .get_or_insert_with(|| (RayPrecomp::of::<true>(ray, &walks[r]), None));
                     let mut t_max = ray.t_max;
                     let first = (node & !LEAF) as usize;
                     let skip = skips[r.min(n - 1)];
@@ -1446,7 +1446,7 @@ impl Leaf for ClosestLeaf<'_> {
         let (ray, walk) = (self.ray, self.walk);
         let (pre, shear) = self
             .pre
-            .get_or_insert_with(|| (RayPrecomp::of(ray, walk), None));
+            .get_or_insert_with(|| (RayPrecomp::of::<false>(ray, walk), None));
         let best = &mut self.best;
         self.bvh.leaf_hits::<false>(
             (pre, shear),
@@ -1483,7 +1483,7 @@ impl<F: FnMut(u32, TriHit) -> bool> Leaf for EachLeaf<'_, F> {
         let (ray, walk) = (self.ray, self.walk);
         let (pre, shear) = self
             .pre
-            .get_or_insert_with(|| (RayPrecomp::of(ray, walk), None));
+            .get_or_insert_with(|| (RayPrecomp::of::<true>(ray, walk), None));
         let visit = &mut self.visit;
         self.bvh.leaf_hits::<true>(
             (pre, shear),

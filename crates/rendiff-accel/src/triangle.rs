@@ -136,12 +136,14 @@ pub(crate) struct RayPrecomp {
     s4: [Vec4; 2],
     /// Added to every vertex's `m` in [`candidates`]: `2Δo/γ₁₀`.
     m_shift: Vec4,
-    /// A triangle whose least translated `Z` is above `z_above`, or whose
+    /// The distance bounds of `candidates::<true>` (see [`RayPrecomp::of`]):
+    /// a triangle whose least translated `Z` is above `z_above`, or whose
     /// greatest is below `z_below`, lies wholly behind the `f64` origin or
     /// wholly past the `f64` ray's `t_max` (which of the two depends on
-    /// the sign of the direction's dominant component; see [`candidates`]).
-    z_above: Vec4,
-    z_below: Vec4,
+    /// the sign of the direction's dominant component). A closest-hit
+    /// walk's are ±∞, never read.
+    z_above: f32,
+    z_below: f32,
 }
 
 impl RayPrecomp {
@@ -151,12 +153,15 @@ impl RayPrecomp {
     #[cfg(test)]
     #[must_use]
     pub(crate) fn new(ray: &Ray64, t_bound: f64) -> RayPrecomp {
-        RayPrecomp::of(ray, &WalkRay::new(ray, t_bound))
+        RayPrecomp::of::<true>(ray, &WalkRay::new(ray, t_bound))
     }
 
-    /// The permutation and shear of `ray`, whose `f32` copy is `walk`.
+    /// The permutation and shear of `ray`, whose `f32` copy is `walk`;
+    /// with `SEGMENT`, the distance bounds of `candidates::<true>` too
+    /// (a closest-hit walk's filter never reads them, and skips their
+    /// arithmetic).
     #[must_use]
-    pub(crate) fn of(ray: &Ray64, walk: &WalkRay) -> RayPrecomp {
+    pub(crate) fn of<const SEGMENT: bool>(ray: &Ray64, walk: &WalkRay) -> RayPrecomp {
         let d = walk.ray.dir;
         let o = walk.ray.origin;
         let ad = d.abs();
@@ -179,21 +184,25 @@ impl RayPrecomp {
         // `t_max·|d_z|` enlarged by γ₁₆ for the `f64` test's rounding of
         // `t`, plus `Δo`; each enlarged by 10⁻⁶ (> the `f32` rounding of
         // a translated coordinate, 2⁻²⁴ relative) and rounded up.
-        let z_behind = f32_at_least(walk.dorigin * (1.0 + 1e-6));
-        let beyond =
-            (ray.t_max * ray.dir[kz].abs() * (1.0 + gamma64(16)) + walk.dorigin) * (1.0 + 1e-6);
-        let z_beyond = if beyond.is_nan() {
-            f32::INFINITY
+        let (z_above, z_below) = if SEGMENT {
+            let z_behind = f32_at_least(walk.dorigin * (1.0 + 1e-6));
+            let beyond =
+                (ray.t_max * ray.dir[kz].abs() * (1.0 + gamma64(16)) + walk.dorigin) * (1.0 + 1e-6);
+            let z_beyond = if beyond.is_nan() {
+                f32::INFINITY
+            } else {
+                f32_at_least(beyond)
+            };
+            // Along +z: behind is `Z < −z_behind`, past the end `Z > z_beyond`;
+            // along −z the two swap sides. The side is the `f64` direction's
+            // (its `f32` copy can round to −0 or +0 where it is below 10⁻⁴⁵).
+            if ray.dir[kz] < 0.0 {
+                (z_behind, -z_beyond)
+            } else {
+                (z_beyond, -z_behind)
+            }
         } else {
-            f32_at_least(beyond)
-        };
-        // Along +z: behind is `Z < −z_behind`, past the end `Z > z_beyond`;
-        // along −z the two swap sides. The side is the `f64` direction's
-        // (its `f32` copy can round to −0 or +0 where it is below 10⁻⁴⁵).
-        let (z_above, z_below) = if ray.dir[kz] < 0.0 {
-            (z_behind, -z_beyond)
-        } else {
-            (z_beyond, -z_behind)
+            (f32::INFINITY, f32::NEG_INFINITY)
         };
         RayPrecomp {
             k: [kx, ky, kz],
@@ -202,8 +211,8 @@ impl RayPrecomp {
             o4: [Vec4::splat(o.x), Vec4::splat(o.y), Vec4::splat(o.z)],
             s4: [Vec4::splat(s.x), Vec4::splat(s.y)],
             m_shift: Vec4::splat(m_shift),
-            z_above: Vec4::splat(z_above),
-            z_below: Vec4::splat(z_below),
+            z_above,
+            z_below,
         }
     }
 
@@ -324,13 +333,15 @@ pub(crate) fn candidates<const SEGMENT: bool>(pre: &RayPrecomp, pack: &TriPack) 
     let (w, ew) = edge(bx, by, bm, bn, ax, ay, am, an);
     let neg = u.cmplt(-eu) | v.cmplt(-ev) | w.cmplt(-ew);
     let pos = u.cmpgt(eu) | v.cmpgt(ev) | w.cmpgt(ew);
-    let mut outside = neg & pos;
-    if SEGMENT {
-        let above = az.min(bz).min(cz).cmpgt(pre.z_above);
-        let below = az.max(bz).max(cz).cmplt(pre.z_below);
-        outside |= above | below;
+    let kept = !(neg & pos).bitmask() & ((1u32 << pack.lanes) - 1);
+    // The distance test only where a lane passed the edges (most packs a
+    // ray meets have none: a branch instead of the test).
+    if SEGMENT && kept != 0 {
+        let above = az.min(bz).min(cz).cmpgt(Vec4::splat(pre.z_above));
+        let below = az.max(bz).max(cz).cmplt(Vec4::splat(pre.z_below));
+        return kept & !(above | below).bitmask();
     }
-    !outside.bitmask() & ((1u32 << pack.lanes) - 1)
+    kept
 }
 
 /// A hit: distance and the barycentric weights (of v0, v1, v2) as the
