@@ -687,9 +687,8 @@ fn shadow_map_error_against_shadow_rays_is_measured() {
 /// Frames drawn into reused memory (`raster::render_into` and
 /// `ray::render_into`, holding the buffers and the frame of the scenes
 /// rendered before: larger and smaller, wider and narrower, with and
-/// without multisampling)
-/// are the fresh renders bit for bit, stats included: nothing of an
-/// earlier frame survives into a later one.
+/// without multisampling) are the fresh renders bit for bit, stats
+/// included: nothing of an earlier frame survives into a later one.
 #[test]
 fn frames_in_reused_memory_are_the_fresh_frames() {
     use rendiff::accel::{Accel, AccelOptions};

@@ -433,6 +433,20 @@ pub(crate) fn intersect(
 mod tests {
     use super::*;
 
+    /// A deterministic stream of numbers in [0, 1) (SplitMix64, 53 bits),
+    /// for the generated cases below.
+    fn uniform(mut state: u64) -> impl FnMut() -> f64 {
+        move || {
+            state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+            let mut z = state;
+            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+            #[expect(clippy::cast_precision_loss, reason = "53 random bits")]
+            let f = ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64;
+            f
+        }
+    }
+
     /// [`intersect`] with the ray's own `f64` shear.
     fn hit_of(pre: &RayPrecomp, v: &[Vec3; 3], t_min: f64, t_max: f64) -> Option<TriHit> {
         intersect(pre, pre.shear64(), v, t_min, t_max)
@@ -515,16 +529,7 @@ mod tests {
     /// and distance, with `f64` directions whose `f32` rounding differs.
     #[test]
     fn the_filter_keeps_every_hit() {
-        let mut state = 0x1234_5678_9abc_def0_u64;
-        let mut next = move || {
-            state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-            let mut z = state;
-            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-            #[expect(clippy::cast_precision_loss, reason = "53 random bits")]
-            let f = ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64;
-            f
-        };
+        let mut next = uniform(0x1234_5678_9abc_def0_u64);
         let mut kept = 0u32;
         for case in 0..200_000u32 {
             let scale = 10f64.powf(next() * 9.0 - 3.0);
@@ -593,16 +598,7 @@ mod tests {
     /// corner coordinate that the `f64` origin has not.
     #[test]
     fn the_segment_filter_keeps_every_hit_on_the_segment() {
-        let mut state = 0x0bad_cafe_f00d_d00d_u64;
-        let mut next = move || {
-            state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-            let mut z = state;
-            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-            #[expect(clippy::cast_precision_loss, reason = "53 random bits")]
-            let f = ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64;
-            f
-        };
+        let mut next = uniform(0x0bad_cafe_f00d_d00d_u64);
         let one_pack = |tri: [Vec3; 3]| {
             let mut pack = TriPack::EMPTY;
             pack.lanes = 1;
