@@ -115,7 +115,7 @@ fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let Some(cmd) = args.first() else {
         bail!(
-            "usage: rendiff-peers summary [--repeats N] | trees [SCENE] [--subdivide K] [--repeats N] | embree [SCENE] [--subdivide K] [--morton] [--repeats N] | povray [SCENE...] [--threads 1,2] [--repeats N] | llvmpipe [--repeats N] | objload [--repeats N] | profile SCENE [--backend raster|ray] [--subdivide K] [--shadowless] [--reuse] [--build] [--repeats N]"
+            "usage: rendiff-peers summary [--repeats N] | trees [SCENE] [--subdivide K] [--repeats N] | embree [SCENE] [--subdivide K] [--morton] [--repeats N] | povray [SCENE...] [--threads 1,2] [--repeats N] | llvmpipe [--repeats N] | objload [--repeats N] | shadows [SCENE] [--subdivide K] [--repeats N] | profile SCENE [--backend raster|ray] [--subdivide K] [--shadowless] [--reuse] [--build] [--repeats N]"
         );
     };
     let rest = &args[1..];
@@ -142,6 +142,10 @@ fn main() -> Result<()> {
             trees(&scene, k, repeats).map(|_| ())
         }
         "objload" => summary::obj_load(repeats).map(|_| ()),
+        "shadows" => {
+            let (scene, k) = bench_scene(rest)?;
+            shadows(&scene, k, repeats)
+        }
         "llvmpipe" => llvmpipe::compare(repeats).map(|_| ()),
         "profile" => {
             let scene = positional(rest)
@@ -164,7 +168,7 @@ fn main() -> Result<()> {
             }
         }
         other => bail!(
-            "unknown command {other:?}: expected summary, embree, trees, povray, llvmpipe, objload or profile"
+            "unknown command {other:?}: expected summary, embree, trees, povray, llvmpipe, objload, shadows or profile"
         ),
     }
 }
@@ -251,6 +255,40 @@ fn profile(
         scene.display(),
         times.len(),
         median(times)
+    );
+    Ok(())
+}
+
+/// Times the shadow rays of the `embree` row alone (one from every visible
+/// point to the first light, eight neighbours at a time,
+/// `transmittance_packets`) on one thread: the median of `repeats` passes,
+/// and how many rays are blocked (the same for every build of the BVH).
+fn shadows(scene: &Path, subdivide: u32, repeats: usize) -> Result<()> {
+    let job = Prepared::load(scene, &Overrides::default())?;
+    let tri = job.tri.subdivided(subdivide);
+    let accel = Accel::new(&tri, AccelOptions::default());
+    let queries = shadow_rays(&tri, &accel);
+    let vis = ShadowRays::new(&accel);
+    let blocked = || -> usize {
+        queries
+            .chunks(4096)
+            .map(|c| {
+                let mut out = vec![rendiff::color::Rgb::WHITE; c.len()];
+                vis.transmittance_packets(c, &mut out);
+                out.iter().filter(|t| t.is_black()).count()
+            })
+            .sum()
+    };
+    let p = pool(1)?;
+    let ms = time_ms(&p, repeats, &|| {
+        std::hint::black_box(blocked());
+    });
+    println!(
+        "{}: {} shadow rays ({} blocked), 1 thread: median {ms:.1} ms = {:.2} M rays/s",
+        scene.display(),
+        queries.len(),
+        blocked(),
+        queries.len() as f64 / ms / 1e3
     );
     Ok(())
 }

@@ -754,8 +754,14 @@ impl Bvh {
         start: usize,
         count: usize,
     ) -> u32 {
+        self.emit_ids(&leaves.order[start..start + count], leaves.tri)
+    }
+
+    /// Appends the packs of a leaf of the triangles `ids`, in that order;
+    /// returns the index of its first pack.
+    fn emit_ids<F: Fn(u32) -> [Vec3; 3]>(&mut self, ids: &[u32], tri: &F) -> u32 {
         let first = u32::try_from(self.packs.len()).unwrap_or(u32::MAX);
-        for chunk in leaves.order[start..start + count].chunks(4) {
+        for chunk in ids.chunks(4) {
             // The pack's coordinates gathered in plain arrays (lane by
             // lane stores into `Vec4`s are bounds-checked and branchy);
             // unused lanes stay zero, as in `TriPack::EMPTY`.
@@ -763,7 +769,7 @@ impl Bvh {
             let mut ids = [u32::MAX; 4];
             for (lane, (&id, slot)) in chunk.iter().zip(&mut ids).enumerate() {
                 *slot = id;
-                for (corner, p) in (leaves.tri)(id).iter().enumerate() {
+                for (corner, p) in tri(id).iter().enumerate() {
                     v[corner][0][lane] = p.x;
                     v[corner][1][lane] = p.y;
                     v[corner][2][lane] = p.z;
@@ -824,23 +830,76 @@ impl Bvh {
         let mut depth = 0;
         let mut pending: [(usize, usize); WIDTH] = [(0, 0); WIDTH];
         let mut np = 0;
+        // Lanes the children leave free: a leaf of several packs takes one
+        // lane per pack while they last, each with the box of its own
+        // triangles, so the node's one slab test culls pack by pack.
+        let mut free = WIDTH - len;
+        let mut lane = 0;
         for (k, kid) in kids[..len].iter().enumerate() {
-            let b = kid.bounds();
-            set_lane(&mut n, k, b);
             match kid {
+                BNode::Leaf {
+                    bounds,
+                    start,
+                    count,
+                } if *count > 4 && count.div_ceil(4) - 1 <= free => {
+                    free -= count.div_ceil(4) - 1;
+                    // The leaf's triangles in the order of their
+                    // centroids along its longest side (ties by id), so
+                    // that each pack's box is small.
+                    let e = bounds.extent();
+                    let axis = if e.x >= e.y && e.x >= e.z {
+                        0
+                    } else if e.y >= e.z {
+                        1
+                    } else {
+                        2
+                    };
+                    // (At most 4·(WIDTH − 1) of them: the node has two
+                    // children or more, and this leaf's packs take its
+                    // own lane and free ones.)
+                    // Keys: the centroid's coordinate (thrice) in an
+                    // order-preserving integer form, then the id.
+                    let mut keyed = [0u64; 4 * WIDTH];
+                    let keyed = &mut keyed[..*count];
+                    for (k, &id) in keyed.iter_mut().zip(&leaves.order[*start..start + count]) {
+                        let t = (leaves.tri)(id);
+                        let c = (t[0][axis] + t[1][axis] + t[2][axis]).to_bits();
+                        let ordered = if c >> 31 == 1 { !c } else { c | 1 << 31 };
+                        *k = u64::from(ordered) << 32 | u64::from(id);
+                    }
+                    keyed.sort_unstable();
+                    for pack in keyed.chunks(4) {
+                        let mut pack_ids = [0u32; 4];
+                        let mut b = Aabb::EMPTY;
+                        for (i, &k) in pack_ids.iter_mut().zip(pack) {
+                            // (The lower half: the id.)
+                            *i = (k & 0xFFFF_FFFF) as u32;
+                            for p in (leaves.tri)(*i) {
+                                b = b.grow(p);
+                            }
+                        }
+                        set_lane(&mut n, lane, b);
+                        n.child[lane] = LEAF | self.emit_ids(&pack_ids[..pack.len()], leaves.tri);
+                        lane += 1;
+                    }
+                }
                 BNode::Leaf { start, count, .. } => {
-                    n.child[k] = LEAF | self.emit_leaf(leaves, *start, *count);
+                    set_lane(&mut n, lane, kid.bounds());
+                    n.child[lane] = LEAF | self.emit_leaf(leaves, *start, *count);
+                    lane += 1;
                 }
                 BNode::Inner { .. } => {
+                    set_lane(&mut n, lane, kid.bounds());
                     let idx = self.nodes.len();
                     self.nodes.push(empty_node());
-                    n.child[k] = u32::try_from(idx).unwrap_or(EMPTY);
+                    n.child[lane] = u32::try_from(idx).unwrap_or(EMPTY);
                     pending[np] = (k, idx);
                     np += 1;
+                    lane += 1;
                 }
             }
         }
-        n.used = (1 << len) - 1;
+        n.used = (1 << lane) - 1;
         self.nodes[slot] = n;
         for &(k, idx) in &pending[..np] {
             depth = depth.max(self.collapse(kids[k], idx, leaves));
@@ -1916,7 +1975,15 @@ mod tests {
                 let lo = Vec3::new(n.min_x[k], n.min_y[k], n.min_z[k]);
                 let hi = Vec3::new(n.max_x[k], n.max_y[k], n.max_z[k]);
                 if n.child[k] & LEAF != 0 {
-                    assert!(leaf_ids(n.child[k]).len() <= MAX_LEAF, "leaf too long");
+                    let len = leaf_ids(n.child[k]).len();
+                    assert!(len <= MAX_LEAF, "leaf too long");
+                    // A leaf keeps several packs behind one box only where
+                    // the node lacks the lanes to give each its own.
+                    let free = WIDTH - n.used.count_ones() as usize;
+                    assert!(
+                        len <= 4 || len.div_ceil(4) - 1 > free,
+                        "a leaf of {len} triangles shares a box beside {free} free lanes"
+                    );
                 }
                 let mut ids = Vec::new();
                 below(bvh, n.child[k], &leaf_ids, &mut ids);
