@@ -1452,10 +1452,17 @@ impl Bvh {
 /// mask of children some ray enters, and each child's mask of rays. The
 /// 8×8 bit matrix is transposed by three exchanges of its off-diagonal
 /// blocks (2×2, 4×4, then 8×8 bits; Hacker's Delight §7-3) instead of a
-/// loop over every ray and child.
+/// loop over every ray and child, and the mask of children is the OR of
+/// the rays' bytes.
 #[inline(always)]
 fn rays_by_child(by_ray: u64) -> (u32, [u32; WIDTH]) {
     const _: () = assert!(WIDTH == 8 && PACKET == 8, "an 8×8 bit matrix");
+    // Some ray enters child k: bit k of some byte (an OR of the bytes).
+    let mut any = by_ray | by_ray >> 32;
+    any |= any >> 16;
+    any |= any >> 8;
+    #[expect(clippy::cast_possible_truncation, reason = "the lowest byte")]
+    let mask = u32::from(any as u8);
     let mut x = by_ray;
     let t = (x ^ (x >> 7)) & 0x00AA_00AA_00AA_00AA;
     x ^= t ^ (t << 7);
@@ -1463,13 +1470,7 @@ fn rays_by_child(by_ray: u64) -> (u32, [u32; WIDTH]) {
     x ^= t ^ (t << 14);
     let t = (x ^ (x >> 28)) & 0x0000_0000_F0F0_F0F0;
     x ^= t ^ (t << 28);
-    let bytes = x.to_le_bytes();
-    let mut mask = 0u32;
-    let mut rays = [0u32; WIDTH];
-    for (k, (r, b)) in rays.iter_mut().zip(bytes).enumerate() {
-        *r = u32::from(b);
-        mask |= u32::from(b != 0) << k;
-    }
+    let rays = x.to_le_bytes().map(u32::from);
     (mask, rays)
 }
 
@@ -1788,7 +1789,7 @@ impl Slab {
         let [ix, iy, iz] = self.inv;
         let far = t_max * Slab::GROW;
         let mut t_near = [0.0; WIDTH];
-        let mut enter = [0u32; WIDTH];
+        let mut t_far = [0.0; WIDTH];
         for k in 0..WIDTH {
             let tx0 = (n.min_x[k] - ox0) * ix;
             let tx1 = (n.max_x[k] - ox1) * ix;
@@ -1809,9 +1810,12 @@ impl Slab {
             ) * Slab::GROW;
             let tf = lane_min(tf, far);
             t_near[k] = tn;
-            enter[k] = u32::from(tn <= tf) << k;
+            t_far[k] = tf;
         }
-        let mask = enter.iter().fold(0, |m, &b| m | b);
+        // `tn <= tf` lane by lane as two `movmskps` (the vectoriser turned
+        // the eight lanes' bits into shuffles and ORs).
+        let half = |a: &[f32], b: &[f32]| Vec4::from_slice(a).cmple(Vec4::from_slice(b)).bitmask();
+        let mask = half(&t_near[..4], &t_far[..4]) | half(&t_near[4..], &t_far[4..]) << 4;
         (mask & n.used, t_near)
     }
 }
