@@ -115,7 +115,7 @@ fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let Some(cmd) = args.first() else {
         bail!(
-            "usage: rendiff-peers summary [--repeats N] | trees [SCENE] [--subdivide K] [--repeats N] | embree [SCENE] [--subdivide K] [--morton] [--repeats N] | povray [SCENE...] [--threads 1,2] [--repeats N] | llvmpipe [--repeats N] | objload [--repeats N] | shadows [SCENE] [--subdivide K] [--repeats N] | profile SCENE [--backend raster|ray] [--subdivide K] [--shadowless] [--reuse] [--build] [--repeats N]"
+            "usage: rendiff-peers summary [--repeats N] | trees [SCENE] [--subdivide K] [--repeats N] | embree [SCENE] [--subdivide K] [--morton] [--repeats N] | povray [SCENE...] [--threads 1,2] [--repeats N] | llvmpipe [--repeats N] | objload [--repeats N] | rays [SCENE] [--subdivide K] [--repeats N] | profile SCENE [--backend raster|ray] [--subdivide K] [--shadowless] [--reuse] [--build] [--repeats N]"
         );
     };
     let rest = &args[1..];
@@ -142,9 +142,9 @@ fn main() -> Result<()> {
             trees(&scene, k, repeats).map(|_| ())
         }
         "objload" => summary::obj_load(repeats).map(|_| ()),
-        "shadows" => {
+        "rays" => {
             let (scene, k) = bench_scene(rest)?;
-            shadows(&scene, k, repeats)
+            rays(&scene, k, repeats)
         }
         "llvmpipe" => llvmpipe::compare(repeats).map(|_| ()),
         "profile" => {
@@ -168,7 +168,7 @@ fn main() -> Result<()> {
             }
         }
         other => bail!(
-            "unknown command {other:?}: expected summary, embree, trees, povray, llvmpipe, objload, shadows or profile"
+            "unknown command {other:?}: expected summary, embree, trees, povray, llvmpipe, objload, rays or profile"
         ),
     }
 }
@@ -259,14 +259,30 @@ fn profile(
     Ok(())
 }
 
-/// Times the shadow rays of the `embree` row alone (one from every visible
-/// point to the first light, eight neighbours at a time,
-/// `transmittance_packets`) on one thread: the median of `repeats` passes,
-/// and how many rays are blocked (the same for every build of the BVH).
-fn shadows(scene: &Path, subdivide: u32, repeats: usize) -> Result<()> {
+/// Times the rays of the `embree` row through our BVH alone, one thread:
+/// the primary rays in 4×2 packets (`intersect_packets`), then the shadow
+/// rays (one from every visible point to the first light, eight
+/// neighbours at a time, `transmittance_packets`); medians of `repeats`
+/// passes, with how many primary rays hit and how many shadow rays are
+/// blocked (the same for every build of the BVH). For profiles of the
+/// walks without Embree or the build in the way.
+fn rays(scene: &Path, subdivide: u32, repeats: usize) -> Result<()> {
     let job = Prepared::load(scene, &Overrides::default())?;
     let tri = job.tri.subdivided(subdivide);
     let accel = Accel::new(&tri, AccelOptions::default());
+    let (_, blocks) = camera_rays(&tri.camera);
+    let primary: usize = blocks.iter().map(Vec::len).sum();
+    let hits = || -> usize {
+        let mut out = [None; 8];
+        blocks
+            .iter()
+            .map(|b| {
+                let out = &mut out[..b.len()];
+                accel.intersect_packets(b, out);
+                out.iter().filter(|h| h.is_some()).count()
+            })
+            .sum()
+    };
     let queries = shadow_rays(&tri, &accel);
     let vis = ShadowRays::new(&accel);
     let blocked = || -> usize {
@@ -280,15 +296,20 @@ fn shadows(scene: &Path, subdivide: u32, repeats: usize) -> Result<()> {
             .sum()
     };
     let p = pool(1)?;
-    let ms = time_ms(&p, repeats, &|| {
+    let t_primary = time_ms(&p, repeats, &|| {
+        std::hint::black_box(hits());
+    });
+    let t_shadow = time_ms(&p, repeats, &|| {
         std::hint::black_box(blocked());
     });
     println!(
-        "{}: {} shadow rays ({} blocked), 1 thread: median {ms:.1} ms = {:.2} M rays/s",
+        "{}, 1 thread: {primary} primary rays in 4x2 packets ({} hit): median {t_primary:.1} ms = {:.2} M rays/s; {} shadow rays ({} blocked): median {t_shadow:.1} ms = {:.2} M rays/s",
         scene.display(),
+        hits(),
+        primary as f64 / t_primary / 1e3,
         queries.len(),
         blocked(),
-        queries.len() as f64 / ms / 1e3
+        queries.len() as f64 / t_shadow / 1e3
     );
     Ok(())
 }
