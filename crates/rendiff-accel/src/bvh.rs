@@ -53,8 +53,10 @@ pub(crate) const PACKET: usize = 8;
 /// The `skip` of a walk that tests every triangle (no triangle has this id).
 pub(crate) const NO_SKIP: u32 = u32::MAX;
 /// A packet's rays that enter an inner node finish its subtree one by one
-/// when they are this many or fewer (measured: 3 ahead of 1 and of 5).
-const SOLO: u32 = 3;
+/// when they are this many or fewer. Measured: 3 ahead of 1 and of 5 while
+/// a packet tested a node ray by ray; 1 ahead of 2 and 3 since it tests
+/// the node against the packet first ([`PacketSlab`]).
+const SOLO: u32 = 1;
 
 /// A node of `WIDTH` children, their boxes as structure of arrays (one
 /// 256-bit vector per plane coordinate on x86-64-v3, two SSE vectors on
