@@ -1102,11 +1102,24 @@ impl Bvh {
         leaf: &mut impl Leaf,
     ) {
         let grow = Slab::GROW;
+        debug_assert!(start & LEAF == 0, "the walk starts at an inner node");
+        // The start node first: a ray that enters none of its children
+        // (most camera rays of a small object) sets up no stack.
+        let n = &self.nodes[start as usize];
+        let (mask, tn) = slab.test(n, *t_max);
+        if mask == 0 {
+            return;
+        }
         // The stack holds (t_near bits << 32 | child).
         let mut stack = Stack::<u64>::default();
         let stack = stack.slice(self.stack_need());
         let mut sp = 0usize;
-        let mut node = start;
+        let (near, rest, m) = order_children(mask, &tn, ordered);
+        for &k in &rest[..m] {
+            stack[sp] = (u64::from(tn[k].to_bits()) << 32) | u64::from(n.child[k]);
+            sp += 1;
+        }
+        let mut node = n.child[near];
         loop {
             if node & LEAF != 0 {
                 if leaf.visit((node & !LEAF) as usize, t_max) {
