@@ -852,7 +852,6 @@ impl Bvh {
                     start,
                     count,
                 } if *count > 4 && count.div_ceil(4) - 1 <= free => {
-                    free -= count.div_ceil(4) - 1;
                     // The leaf's triangles in the order of their
                     // centroids along its longest side (ties by id), so
                     // that each pack's box is small.
@@ -878,18 +877,32 @@ impl Bvh {
                         *k = u64::from(ordered) << 32 | u64::from(id);
                     }
                     keyed.sort_unstable();
-                    for pack in keyed.chunks(4) {
-                        let mut pack_ids = [0u32; 4];
-                        let mut b = Aabb::EMPTY;
-                        for (i, &k) in pack_ids.iter_mut().zip(pack) {
-                            // (The lower half: the id.)
-                            *i = (k & 0xFFFF_FFFF) as u32;
-                            for p in (leaves.tri)(*i) {
-                                b = b.grow(p);
+                    // (The lower half of a key: the id.)
+                    let mut ids = [0u32; 4 * WIDTH];
+                    for (i, &k) in ids.iter_mut().zip(keyed.iter()) {
+                        *i = (k & 0xFFFF_FFFF) as u32;
+                    }
+                    let ids = &ids[..*count];
+                    let mut boxes = [Aabb::EMPTY; WIDTH];
+                    for (b, pack) in boxes.iter_mut().zip(ids.chunks(4)) {
+                        for &id in pack {
+                            for p in (leaves.tri)(id) {
+                                *b = b.grow(p);
                             }
                         }
-                        set_lane(&mut n, lane, b);
-                        n.child[lane] = LEAF | self.emit_ids(&pack_ids[..pack.len()], leaves.tri);
+                    }
+                    let packs = count.div_ceil(4);
+                    if split_pays(bounds, &boxes[..packs]) {
+                        free -= packs - 1;
+                        for (b, pack) in boxes.iter().zip(ids.chunks(4)) {
+                            set_lane(&mut n, lane, *b);
+                            n.child[lane] = LEAF | self.emit_ids(pack, leaves.tri);
+                            lane += 1;
+                        }
+                    } else {
+                        // One lane, the sorted packs behind the leaf's box.
+                        set_lane(&mut n, lane, kid.bounds());
+                        n.child[lane] = LEAF | self.emit_ids(ids, leaves.tri);
                         lane += 1;
                     }
                 }
@@ -2043,6 +2056,27 @@ impl PacketSlab {
     }
 }
 
+/// Whether a leaf of several packs (its box `leaf`, its packs' boxes
+/// `packs`) is better split into a lane per pack, by the surface-area
+/// estimate of a ray's work once it reaches the node: whole, every ray
+/// that enters the leaf's box tests every pack and pays one leaf visit;
+/// split, a ray pays a pack test and a visit for each pack box it enters.
+/// A visit (the lane's stack entry, the leaf's loop) is taken as a quarter
+/// of a pack test (about 50 against 200 instructions in the shadow walk's
+/// profile). Packs as large as the leaf (a scene's few huge triangles)
+/// stay together: their boxes would cull nothing and cost a visit each.
+fn split_pays(leaf: &Aabb, packs: &[Aabb]) -> bool {
+    const VISIT: f32 = 0.25;
+    let half_area = |b: &Aabb| {
+        let e = b.extent();
+        e.x * e.y + e.y * e.z + e.z * e.x
+    };
+    #[expect(clippy::cast_precision_loss, reason = "a few packs")]
+    let whole = half_area(leaf) * (packs.len() as f32 + VISIT);
+    let split: f32 = packs.iter().map(|b| half_area(b) * (1.0 + VISIT)).sum();
+    split < whole
+}
+
 fn empty_node() -> Node {
     let inf = [f32::INFINITY; WIDTH];
     Node {
@@ -2205,10 +2239,21 @@ mod tests {
                     let len = leaf_ids(n.child[k]).len();
                     assert!(len <= MAX_LEAF, "leaf too long");
                     // A leaf keeps several packs behind one box only where
-                    // the node lacks the lanes to give each its own.
+                    // the node lacks the lanes to give each its own, or
+                    // where its packs' boxes would not pay.
                     let free = WIDTH - n.used.count_ones() as usize;
+                    let ids = leaf_ids(n.child[k]);
+                    let boxes: Vec<Aabb> = ids
+                        .chunks(4)
+                        .map(|p| {
+                            p.iter().fold(Aabb::EMPTY, |b, &id| {
+                                b.union(Aabb::from_points(tris[id as usize]))
+                            })
+                        })
+                        .collect();
+                    let lane_box = Aabb::from_min_max(lo, hi);
                     assert!(
-                        len <= 4 || len.div_ceil(4) - 1 > free,
+                        len <= 4 || len.div_ceil(4) - 1 > free || !split_pays(&lane_box, &boxes),
                         "a leaf of {len} triangles shares a box beside {free} free lanes"
                     );
                 }
