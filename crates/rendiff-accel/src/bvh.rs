@@ -1907,9 +1907,13 @@ impl Slab {
 /// ([`PacketSlab::children_of`]).
 #[derive(Clone, Copy, Debug)]
 struct PacketSlab {
+    /// Per axis, each ray's origin against the lower planes ([`Slab`]).
     lo: [[f32; PACKET]; 3],
+    /// Per axis, each ray's origin against the upper planes.
     hi: [[f32; PACKET]; 3],
+    /// Per axis, each ray's inverse direction.
     inv: [[f32; PACKET]; 3],
+    /// Each ray's `t_min`.
     t_min: [f32; PACKET],
     /// `t_max · GROW` of each ray (its walk's bound).
     far: [f32; PACKET],
