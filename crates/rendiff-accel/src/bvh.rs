@@ -1929,16 +1929,10 @@ struct PacketSlab {
 impl PacketSlab {
     #[inline(always)]
     fn new(slabs: &[Slab; PACKET], t_max: &[f32; PACKET]) -> PacketSlab {
-        let lane =
-            |f: &dyn Fn(&Slab) -> f32| -> [f32; PACKET] { std::array::from_fn(|r| f(&slabs[r])) };
-        let lo = [lane(&|s| s.lo[0]), lane(&|s| s.lo[1]), lane(&|s| s.lo[2])];
-        let hi = [lane(&|s| s.hi[0]), lane(&|s| s.hi[1]), lane(&|s| s.hi[2])];
-        let inv = [
-            lane(&|s| s.inv[0]),
-            lane(&|s| s.inv[1]),
-            lane(&|s| s.inv[2]),
-        ];
-        let t_min = lane(&|s| s.t_min);
+        let lo = std::array::from_fn(|a| std::array::from_fn(|r| slabs[r].lo[a]));
+        let hi = std::array::from_fn(|a| std::array::from_fn(|r| slabs[r].hi[a]));
+        let inv = std::array::from_fn(|a| std::array::from_fn(|r| slabs[r].inv[a]));
+        let t_min = std::array::from_fn(|r| slabs[r].t_min);
         let far: [f32; PACKET] = std::array::from_fn(|r| t_max[r] * Slab::GROW);
         let range = |v: &[f32; PACKET]| {
             v.iter()
