@@ -452,12 +452,10 @@ impl Texture {
         &self.texels
     }
 
-    fn texel(&self, x: i64, y: i64) -> [f32; 4] {
-        let w = i64::from(self.width);
-        let h = i64::from(self.height);
-        let xi = usize::try_from(x.rem_euclid(w)).unwrap_or(0);
-        let yi = usize::try_from(y.rem_euclid(h)).unwrap_or(0);
-        self.texels[yi * self.width as usize + xi]
+    /// The texel in column `x`, row `y`, both already wrapped into the
+    /// texture (`x < width`, `y < height`).
+    fn texel(&self, x: usize, y: usize) -> [f32; 4] {
+        self.texels[y * self.width as usize + x]
     }
 
     /// Bilinear lookup at uv, wrapping (repeat) outside [0, 1).
@@ -482,23 +480,34 @@ impl Texture {
     #[must_use]
     #[expect(
         clippy::cast_possible_truncation,
-        reason = "floor of a finite, wrapped coordinate; non-finite input is mapped to 0 first"
+        clippy::cast_sign_loss,
+        clippy::cast_precision_loss,
+        reason = "floor of a finite coordinate wrapped into 0 ..= w (w < 2^32); non-finite input is mapped to 0 first"
     )]
     pub fn bilinear(&self, x: f64, y: f64) -> [f32; 4] {
         let x = if x.is_finite() { x } else { 0.0 };
         let y = if y.is_finite() { y } else { 0.0 };
         // Wrap first so huge coordinates keep their fractional part.
-        let x = (x - 0.5).rem_euclid(f64::from(self.width));
-        let y = (y - 0.5).rem_euclid(f64::from(self.height));
-        let x0 = x.floor();
-        let y0 = y.floor();
-        let fx = (x - x0) as f32;
-        let fy = (y - y0) as f32;
-        let (x0, y0) = (x0 as i64, y0 as i64);
+        let x = wrap(x - 0.5, f64::from(self.width));
+        let y = wrap(y - 0.5, f64::from(self.height));
+        // Both lie in 0 ..= w (`wrap` can round up to w itself, as
+        // `rem_euclid` does), so the cast is the floor.
+        let (x0, y0) = (x as usize, y as usize);
+        let fx = (x - x0 as f64) as f32;
+        let fy = (y - y0 as f64) as f32;
+        // The texel columns x0 and x0 + 1 wrapped into 0 … w − 1 (x0 is w
+        // only where `wrap` rounded up): a comparison, not a division.
+        let (w, h) = (self.width as usize, self.height as usize);
+        let next = |i: usize, n: usize| if i + 1 >= n { i + 1 - n } else { i + 1 };
+        let (x0, y0) = (
+            if x0 >= w { x0 - w } else { x0 },
+            if y0 >= h { y0 - h } else { y0 },
+        );
+        let (x1, y1) = (next(x0, w), next(y0, h));
         let a = self.texel(x0, y0);
-        let b = self.texel(x0 + 1, y0);
-        let c = self.texel(x0, y0 + 1);
-        let d = self.texel(x0 + 1, y0 + 1);
+        let b = self.texel(x1, y0);
+        let c = self.texel(x0, y1);
+        let d = self.texel(x1, y1);
         let mut out = [0.0f32; 4];
         for k in 0..4 {
             let top = a[k] + (b[k] - a[k]) * fx;
@@ -507,6 +516,36 @@ impl Texture {
         }
         out
     }
+}
+
+/// `x.rem_euclid(w)` for a finite `x` and a whole `w` in 1 … 2³², up to
+/// the sign of a zero result, without the bit-by-bit loop of libm's `fmod`
+/// that `rem_euclid` calls (5 % of `grazing`'s render).
+///
+/// Exactness: `q = trunc(fl(x/w))` differs from `trunc(x/w)` only where
+/// `x/w` lies just below a whole number and rounds up to it (rounding is
+/// monotone and whole numbers are representable), so `q` is the true
+/// quotient or one more in magnitude. `q·w` is a whole number below 2⁵³,
+/// exact. `x − q·w` is then the true remainder `m` or `m ∓ w`, a multiple of
+/// `ulp(x)` smaller than `w ≤ |x|` in magnitude (for `|x| < w`, `q` is 0 or
+/// ±1 with `x − q·w` exact by Sterbenz), so it is exact too. Where it is
+/// negative, `r + w` is `rem_euclid`'s own last step (`m + w`, rounded) or,
+/// after the overshoot, the representable `m` itself. `+0.0` stands for
+/// `rem_euclid`'s `−0.0`; both floor to texel 0 with a zero fraction.
+/// Beyond 2⁵², where `q·w` could round, the standard remainder is used.
+fn wrap(x: f64, w: f64) -> f64 {
+    const EXACT: f64 = 4_503_599_627_370_496.0; // 2^52
+    if x.abs() >= EXACT {
+        return x.rem_euclid(w);
+    }
+    #[expect(
+        clippy::cast_possible_truncation,
+        clippy::cast_precision_loss,
+        reason = "|x / w| < 2^52: the cast is trunc, exact both ways"
+    )]
+    let q = (x / w) as i64 as f64;
+    let r = x - q * w;
+    if r < 0.0 { r + w } else { r }
 }
 
 #[cfg(test)]
@@ -550,6 +589,151 @@ mod tests {
             t.sample(Vec2::new(3.25, -1.75)),
             t.sample(Vec2::new(0.25, 0.25))
         );
+    }
+
+    /// The lookup as it was with `rem_euclid` (libm's `fmod`) and integer
+    /// `rem_euclid` on the texel indices: the reference `bilinear` must
+    /// match bit for bit.
+    #[expect(
+        clippy::cast_possible_truncation,
+        reason = "the lookup as it was, casts included"
+    )]
+    fn bilinear_by_rem_euclid(t: &Texture, x: f64, y: f64) -> [f32; 4] {
+        let x = if x.is_finite() { x } else { 0.0 };
+        let y = if y.is_finite() { y } else { 0.0 };
+        let x = (x - 0.5).rem_euclid(f64::from(t.width));
+        let y = (y - 0.5).rem_euclid(f64::from(t.height));
+        let (x0, y0) = (x.floor(), y.floor());
+        let (fx, fy) = ((x - x0) as f32, (y - y0) as f32);
+        let (x0, y0) = (x0 as i64, y0 as i64);
+        let at = |i: i64, j: i64| {
+            let xi = i.rem_euclid(i64::from(t.width)) as usize;
+            let yi = j.rem_euclid(i64::from(t.height)) as usize;
+            t.texels[yi * t.width as usize + xi]
+        };
+        let (a, b, c, d) = (
+            at(x0, y0),
+            at(x0 + 1, y0),
+            at(x0, y0 + 1),
+            at(x0 + 1, y0 + 1),
+        );
+        let mut out = [0.0f32; 4];
+        for k in 0..4 {
+            let top = a[k] + (b[k] - a[k]) * fx;
+            let bot = c[k] + (d[k] - c[k]) * fx;
+            out[k] = top + (bot - top) * fy;
+        }
+        out
+    }
+
+    #[expect(clippy::cast_precision_loss, reason = "test values of a few bits")]
+    fn graded(w: u32, h: u32) -> Texture {
+        let n = (w * h) as usize;
+        Texture::from_texels(
+            w,
+            h,
+            (0..n)
+                .map(|i| {
+                    let v = i as f32 / n as f32;
+                    [v, 1.0 - v, (i % 7) as f32 / 7.0, 1.0]
+                })
+                .collect(),
+        )
+    }
+
+    #[expect(clippy::cast_precision_loss, reason = "test values of a few bits")]
+    #[test]
+    fn wrap_is_rem_euclid_up_to_the_sign_of_zero() {
+        // Just below and above whole multiples (where fl(x / w) rounds up
+        // to the next quotient), tiny negatives (where rem_euclid rounds up
+        // to w itself), subnormals, and the 2^52 switch.
+        let mut xs = vec![0.0, -0.0, 5e-324, -5e-324, 1e-300, -1e-300, 0.5, -0.5];
+        for w in [
+            1.0f64,
+            2.0,
+            3.0,
+            7.0,
+            64.0,
+            1000.0,
+            4096.0,
+            65_535.0,
+            4_294_967_295.0,
+        ] {
+            for k in [
+                -1e15f64, -12_345.0, -3.0, -2.0, -1.0, 0.0, 1.0, 2.0, 3.0, 1e6, 1e15,
+            ] {
+                let m = k * w;
+                for x in [m, m.next_up(), m.next_down(), m + 0.5, m - 0.5] {
+                    xs.push(x);
+                }
+            }
+            for x in [
+                2f64.powi(52),
+                2f64.powi(52).next_down(),
+                -(2f64.powi(52).next_down()),
+                1e300,
+            ] {
+                xs.push(x);
+            }
+            let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+            for _ in 0..20_000 {
+                seed = seed
+                    .wrapping_mul(6_364_136_223_846_793_005)
+                    .wrapping_add(1_442_695_040_888_963_407);
+                let e = ((seed >> 58) as i32) - 20; // 2^-20 … 2^43
+                let u = (seed >> 11) as f64 / (1u64 << 53) as f64;
+                let x = (u - 0.5) * 2f64.powi(e) * w;
+                xs.push(x);
+            }
+            for &x in &xs {
+                let (a, b) = (wrap(x, w), x.rem_euclid(w));
+                assert!(
+                    a == b && (0.0..=w).contains(&a),
+                    "wrap({x:e}, {w}) = {a:e}, rem_euclid {b:e}"
+                );
+            }
+        }
+    }
+
+    #[expect(clippy::cast_precision_loss, reason = "test values of a few bits")]
+    #[test]
+    fn bilinear_is_the_rem_euclid_lookup_bit_for_bit() {
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        for (w, h) in [(1, 1), (1, 3), (2, 2), (5, 3), (16, 9), (64, 64)] {
+            let t = graded(w, h);
+            for i in 0..20_000 {
+                seed ^= seed << 13;
+                seed ^= seed >> 7;
+                seed ^= seed << 17;
+                let e = (seed >> 60) as i32 - 4; // scales 2^-4 … 2^11 texels
+                let fx = ((seed & 0xffff_ffff) as f64 / 4_294_967_296.0 - 0.5)
+                    * 2f64.powi(e)
+                    * f64::from(w);
+                let fy = (((seed >> 32) & 0x0fff_ffff) as f64 / 268_435_456.0 - 0.5)
+                    * 2f64.powi(e)
+                    * f64::from(h);
+                // Every 7th coordinate on a texel centre or edge exactly.
+                let (x, y) = if i % 7 == 0 {
+                    (fx.round() + 0.5, fy.round())
+                } else {
+                    (fx, fy)
+                };
+                let (a, b) = (t.bilinear(x, y), bilinear_by_rem_euclid(&t, x, y));
+                assert!(
+                    a.iter().zip(&b).all(|(p, q)| p.to_bits() == q.to_bits()),
+                    "{w}x{h} at ({x:e}, {y:e}): {a:?} against {b:?}"
+                );
+            }
+            for (x, y) in [
+                (f64::NAN, 1.0),
+                (f64::INFINITY, -2.5),
+                (-1e-300, 0.5),
+                (1e300, -1e300),
+                (0.5, 0.5),
+            ] {
+                assert_eq!(t.bilinear(x, y), bilinear_by_rem_euclid(&t, x, y));
+            }
+        }
     }
 
     fn jpeg() -> Vec<u8> {
