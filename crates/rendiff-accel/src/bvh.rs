@@ -515,6 +515,54 @@ fn radix_sort_codes(keys: &mut Vec<u64>) {
     }
 }
 
+/// The children of an 8-wide node over the binary `node`: up to [`WIDTH`]
+/// of them, found by opening the inner child of largest surface area
+/// until there are `WIDTH` or none is inner; and how many.
+fn gather(node: &BNode) -> ([&BNode; WIDTH], usize) {
+    let mut kids: [&BNode; WIDTH] = [node; WIDTH];
+    let mut len = match node {
+        BNode::Inner { children, .. } => {
+            kids[0] = &children[0];
+            kids[1] = &children[1];
+            2
+        }
+        BNode::Leaf { .. } => 1,
+    };
+    while len < WIDTH {
+        let mut open = None;
+        let mut best_area = f32::NEG_INFINITY;
+        for (i, k) in kids[..len].iter().enumerate() {
+            if let BNode::Inner { bounds, .. } = k {
+                let a = bounds.half_area();
+                if a > best_area {
+                    best_area = a;
+                    open = Some(i);
+                }
+            }
+        }
+        let Some(i) = open else { break };
+        let BNode::Inner { children, .. } = kids[i] else {
+            break;
+        };
+        kids[i] = &children[0];
+        kids[len] = &children[1];
+        len += 1;
+    }
+    (kids, len)
+}
+
+/// The 8-wide nodes [`Bvh::collapse`] makes of the inner binary `node`:
+/// its own and one for each inner child [`gather`] gives it, counted by
+/// the same gathering, so that the node array is allocated once.
+fn wide_nodes(node: &BNode) -> usize {
+    let (kids, len) = gather(node);
+    1 + kids[..len]
+        .iter()
+        .filter(|k| matches!(k, BNode::Inner { .. }))
+        .map(|k| wide_nodes(k))
+        .sum::<usize>()
+}
+
 /// The binary tree of `prims` in Morton order (a linear BVH, Lauterbach et
 /// al. 2009): each primitive's centroid quantised to a 1024³ grid over the
 /// centroid bounds, its three coordinates' bits interleaved, the
@@ -749,8 +797,14 @@ impl Bvh {
             }
             BNode::Inner { .. } => {
                 bvh.root = 0;
+                // Counted first: at ten million triangles the array's
+                // doublings (each a copy into fresh pages) were a third of
+                // the Morton build.
+                let wide = wide_nodes(&tree);
+                bvh.nodes.reserve_exact(wide);
                 bvh.nodes.push(empty_node());
                 bvh.depth = bvh.collapse(&tree, 0, &leaves);
+                debug_assert_eq!(bvh.nodes.len(), wide, "the count is exact");
             }
         }
         bvh
@@ -806,36 +860,7 @@ impl Bvh {
         slot: usize,
         leaves: &Leaves<'_, F>,
     ) -> u32 {
-        // Gather up to WIDTH children by opening the largest inner child.
-        let mut kids: [&BNode; WIDTH] = [node; WIDTH];
-        let mut len = match node {
-            BNode::Inner { children, .. } => {
-                kids[0] = &children[0];
-                kids[1] = &children[1];
-                2
-            }
-            BNode::Leaf { .. } => 1,
-        };
-        while len < WIDTH {
-            let mut open = None;
-            let mut best_area = f32::NEG_INFINITY;
-            for (i, k) in kids[..len].iter().enumerate() {
-                if let BNode::Inner { bounds, .. } = k {
-                    let a = bounds.half_area();
-                    if a > best_area {
-                        best_area = a;
-                        open = Some(i);
-                    }
-                }
-            }
-            let Some(i) = open else { break };
-            let BNode::Inner { children, .. } = kids[i] else {
-                break;
-            };
-            kids[i] = &children[0];
-            kids[len] = &children[1];
-            len += 1;
-        }
+        let (kids, len) = gather(node);
         let mut n = empty_node();
         let mut depth = 0;
         let mut pending: [(usize, usize); WIDTH] = [(0, 0); WIDTH];
