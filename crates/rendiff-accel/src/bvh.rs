@@ -204,13 +204,6 @@ impl BNode {
         }
     }
 
-    /// The packs of four triangles the leaves below fill.
-    fn packs(&self) -> usize {
-        match self {
-            BNode::Leaf { count, .. } => count.div_ceil(4),
-            BNode::Inner { children, .. } => children[0].packs() + children[1].packs(),
-        }
-    }
 }
 
 /// What leaf emission needs: the ids in leaf order and the vertices.
@@ -551,16 +544,22 @@ fn gather(node: &BNode) -> ([&BNode; WIDTH], usize) {
     (kids, len)
 }
 
-/// The 8-wide nodes [`Bvh::collapse`] makes of the inner binary `node`:
-/// its own and one for each inner child [`gather`] gives it, counted by
-/// the same gathering, so that the node array is allocated once.
-fn wide_nodes(node: &BNode) -> usize {
-    let (kids, len) = gather(node);
-    1 + kids[..len]
-        .iter()
-        .filter(|k| matches!(k, BNode::Inner { .. }))
-        .map(|k| wide_nodes(k))
-        .sum::<usize>()
+/// The 8-wide nodes [`Bvh::collapse`] makes of the binary tree `node`
+/// and the packs its leaves fill, in one walk: a node of its own and one
+/// for each inner child [`gather`] gives it (counted by the same
+/// gathering), and the packs of each leaf child; so that both arrays are
+/// allocated once.
+fn tally(node: &BNode) -> (usize, usize) {
+    match node {
+        BNode::Leaf { count, .. } => (0, count.div_ceil(4)),
+        BNode::Inner { .. } => {
+            let (kids, len) = gather(node);
+            kids[..len].iter().fold((1, 0), |(nodes, packs), k| {
+                let (n, p) = tally(k);
+                (nodes + n, packs + p)
+            })
+        }
+    }
 }
 
 /// The binary tree of `prims` in Morton order (a linear BVH, Lauterbach et
@@ -785,10 +784,14 @@ impl Bvh {
             order: &order,
             tri: &tri,
         };
-        // The packs are known before they are written: no growth, no copies.
-        let packs = tree.packs();
+        // The nodes and packs are counted before they are written: no
+        // growth, no copies (at ten million triangles the node array's
+        // doublings, each a copy into fresh pages, were a third of the
+        // Morton build).
+        let (wide, packs) = tally(&tree);
         bvh.packs.reserve_exact(packs);
         bvh.ids.reserve_exact(4 * packs);
+        bvh.nodes.reserve_exact(wide);
         match &tree {
             BNode::Leaf { start, count, .. } => {
                 bvh.root = LEAF | bvh.emit_leaf(&leaves, *start, *count);
@@ -797,16 +800,11 @@ impl Bvh {
             }
             BNode::Inner { .. } => {
                 bvh.root = 0;
-                // Counted first: at ten million triangles the array's
-                // doublings (each a copy into fresh pages) were a third of
-                // the Morton build.
-                let wide = wide_nodes(&tree);
-                bvh.nodes.reserve_exact(wide);
                 bvh.nodes.push(empty_node());
                 bvh.depth = bvh.collapse(&tree, 0, &leaves);
-                debug_assert_eq!(bvh.nodes.len(), wide, "the count is exact");
             }
         }
+        debug_assert_eq!((bvh.nodes.len(), bvh.packs.len()), (wide, packs), "the counts are exact");
         bvh
     }
 
