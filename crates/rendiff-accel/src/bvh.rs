@@ -203,7 +203,6 @@ impl BNode {
             BNode::Leaf { bounds, .. } | BNode::Inner { bounds, .. } => *bounds,
         }
     }
-
 }
 
 /// What leaf emission needs: the ids in leaf order and the vertices.
@@ -804,7 +803,11 @@ impl Bvh {
                 bvh.depth = bvh.collapse(&tree, 0, &leaves);
             }
         }
-        debug_assert_eq!((bvh.nodes.len(), bvh.packs.len()), (wide, packs), "the counts are exact");
+        debug_assert_eq!(
+            (bvh.nodes.len(), bvh.packs.len()),
+            (wide, packs),
+            "the counts are exact"
+        );
         bvh
     }
 
