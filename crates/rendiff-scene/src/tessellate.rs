@@ -1065,18 +1065,30 @@ fn weld_positions(
     // with no input that degrades it. Each welded position keeps its first
     // occurrence's place, so the result is what a first-come numbering
     // gives.
-    let mut order: Vec<([u32; 3], u32)> = world
+    // Each pair packed into one `u128` (key words high to low, then the
+    // index): the same order as the tuples' lexicographic one, compared in
+    // two 64-bit halves instead of four words (the sort was half of
+    // tessellating `dense.toml`).
+    let mut order: Vec<u128> = world
         .iter()
         .zip(0u32..)
-        .map(|(w, k)| (weld_key(*w), k))
+        .map(|(w, k)| {
+            let [a, b, c] = weld_key(*w);
+            u128::from(a) << 96 | u128::from(b) << 64 | u128::from(c) << 32 | u128::from(k)
+        })
         .collect();
     order.sort_unstable();
     // first[k]: the first vertex with vertex k's position.
+    #[expect(
+        clippy::cast_possible_truncation,
+        reason = "the low 32 bits: the index"
+    )]
+    let index = |e: u128| e as u32;
     let mut first: Vec<u32> = vec![0; world.len()];
-    for group in order.chunk_by(|a, b| a.0 == b.0) {
-        let lead = group[0].1;
-        for &(_, k) in group {
-            first[k as usize] = lead;
+    for group in order.chunk_by(|a, b| a >> 32 == b >> 32) {
+        let lead = index(group[0]);
+        for &e in group {
+            first[index(e) as usize] = lead;
         }
     }
     let mut welded: Vec<Vec3> = Vec::with_capacity(world.len());
