@@ -518,8 +518,8 @@ impl Texture {
     }
 }
 
-/// `x.rem_euclid(w)` for a finite `x` and a whole `w` in 1 … 2³², up to
-/// the sign of a zero result, without the bit-by-bit loop of libm's `fmod`
+/// `x.rem_euclid(w)` for a finite `x` and a whole `w` in 1 … 2³², but a
+/// zero result always `+0.0`, without the bit-by-bit loop of libm's `fmod`
 /// that `rem_euclid` calls (5 % of `grazing`'s render).
 ///
 /// Exactness: `q = trunc(fl(x/w))` differs from `trunc(x/w)` only where
@@ -530,13 +530,20 @@ impl Texture {
 /// `ulp(x)` smaller than `w ≤ |x|` in magnitude (for `|x| < w`, `q` is 0 or
 /// ±1 with `x − q·w` exact by Sterbenz), so it is exact too. Where it is
 /// negative, `r + w` is `rem_euclid`'s own last step (`m + w`, rounded) or,
-/// after the overshoot, the representable `m` itself. `+0.0` stands for
-/// `rem_euclid`'s `−0.0`; both floor to texel 0 with a zero fraction.
-/// Beyond 2⁵², where `q·w` could round, the standard remainder is used.
+/// after the overshoot, the representable `m` itself. A zero result is
+/// `+0.0` where `rem_euclid` gives `−0.0`; both floor to texel 0, and the
+/// caller's fraction is `+0.0` either way, as it was.
+///
+/// From 2⁵² up the standard remainder is used (the bound is generous:
+/// the argument needs `|x| + w < 2⁵³`), its `−0.0` made `+0.0` as well:
+/// the caller's fraction `x − floor(x)` had been `+0.0` for both zeros,
+/// and `x − 0` keeps the sign (a `−0.0` texel channel times a `−0.0`
+/// fraction would otherwise turn from `+0.0` into `−0.0`).
 fn wrap(x: f64, w: f64) -> f64 {
     const EXACT: f64 = 4_503_599_627_370_496.0; // 2^52
     if x.abs() >= EXACT {
-        return x.rem_euclid(w);
+        // (`abs` changes only a −0.0: the remainder is never negative.)
+        return x.rem_euclid(w).abs();
     }
     #[expect(
         clippy::cast_possible_truncation,
@@ -635,7 +642,14 @@ mod tests {
             (0..n)
                 .map(|i| {
                     let v = i as f32 / n as f32;
-                    [v, 1.0 - v, (i % 7) as f32 / 7.0, 1.0]
+                    // Some −0.0 channels: a lookup's zero fractions must
+                    // keep their sign as before (`0·(−0)` is −0).
+                    let b = if i % 7 == 0 {
+                        -0.0
+                    } else {
+                        (i % 7) as f32 / 7.0
+                    };
+                    [v, 1.0 - v, b, 1.0]
                 })
                 .collect(),
         )
@@ -724,14 +738,24 @@ mod tests {
                     "{w}x{h} at ({x:e}, {y:e}): {a:?} against {b:?}"
                 );
             }
+            // Beyond 2^52 (the standard remainder's side of `wrap`), on
+            // and off whole multiples of the size.
             for (x, y) in [
                 (f64::NAN, 1.0),
                 (f64::INFINITY, -2.5),
                 (-1e-300, 0.5),
                 (1e300, -1e300),
                 (0.5, 0.5),
+                (-1e17, -1e17),
+                (-1e17 + 0.5, -1e17 + 0.5),
+                (2f64.powi(60) + 0.5, -(2f64.powi(53)) + 0.5),
+                (-(2f64.powi(52)) - 64.0, 2f64.powi(52) + 64.0),
             ] {
-                assert_eq!(t.bilinear(x, y), bilinear_by_rem_euclid(&t, x, y));
+                let (a, b) = (t.bilinear(x, y), bilinear_by_rem_euclid(&t, x, y));
+                assert!(
+                    a.iter().zip(&b).all(|(p, q)| p.to_bits() == q.to_bits()),
+                    "{w}x{h} at ({x:e}, {y:e}): {a:?} against {b:?}"
+                );
             }
         }
     }
