@@ -1319,7 +1319,8 @@ mod tests {
     #[test]
     fn first_line_is_lines_then_tokenize() {
         let alphabet = [
-            'a', '1', ' ', '\t', '\n', '\r', '#', '\u{b}', '\u{e9}', '\u{a0}', '/',
+            'a', '1', ' ', '\t', '\n', '\r', '#', '\u{b}', '\u{c}', '\u{85}', '\u{e9}', '\u{a0}',
+            '/',
         ];
         let mut texts: Vec<String> = vec![
             "v 1 2 3\nf 1 2 3\r\nvt 0 0\rvn 0 0 1".into(),
