@@ -755,3 +755,51 @@ fn frames_in_reused_memory_are_the_fresh_frames() {
         );
     }
 }
+
+/// The shading inputs a row of samples takes with the triangle's own part
+/// kept from one sample to the next (`view_surface_after`, as the
+/// rasterizer's shading pass and the ray tracer call it) are those of
+/// `view_surface` bit for bit, on every bundled scene's triangles (smooth
+/// normals, uvs, bump maps, degenerate slivers): runs of one triangle,
+/// switches, and returns to an earlier one, each at drawn rays.
+#[test]
+fn kept_triangle_parts_give_the_same_shading_inputs() {
+    let mut rng = Rng(0x5eed_7a1e);
+    for name in crate::util::bundled_scenes() {
+        let job = crate::util::load(&name, &rendiff::Overrides::default());
+        let tri = &job.tri;
+        let n = u32::try_from(tri.len()).unwrap();
+        let mut last = None;
+        let mut prev = 0;
+        for k in 0..3000u32 {
+            // Runs of one triangle, a neighbour, a jump, and back.
+            let id = match k % 7 {
+                0 => rng.below(u64::from(n)) as u32,
+                1 => prev,
+                2 => (prev + 1) % n,
+                _ => prev,
+            };
+            prev = id;
+            let v = tri.triangle(id);
+            let c = to_f64((v[0] + v[1] + v[2]) / 3.0);
+            let o = c + DVec3::new(
+                rng.range(-3.0, 3.0),
+                rng.range(0.5, 3.0),
+                rng.range(-3.0, 3.0),
+            );
+            let target = c + DVec3::new(
+                rng.range(-0.1, 0.1),
+                rng.range(-0.1, 0.1),
+                rng.range(-0.1, 0.1),
+            );
+            let d = (target - o).normalize();
+            let (a, pa) = tri.view_surface_after(&mut last, id, o, d);
+            let (b, pb) = tri.view_surface(id, o, d);
+            assert_eq!(
+                format!("{a:?} {pa:?}"),
+                format!("{b:?} {pb:?}"),
+                "{name}: triangle {id}"
+            );
+        }
+    }
+}

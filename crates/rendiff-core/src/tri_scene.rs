@@ -389,49 +389,55 @@ impl TriScene {
     /// [`TriScene::surface_at`] given the triangle's vertices `v`.
     #[inline]
     fn surface_on(&self, tri: u32, v: [Vec3; 3], b: Bary) -> SurfacePoint {
+        self.tri_consts(tri, v).surface(b)
+    }
+
+    /// What [`TriScene::surface_at`] reads or derives from triangle `tri`
+    /// (vertices `v`) alone, whatever the weights.
+    #[inline]
+    fn tri_consts(&self, tri: u32, v: [Vec3; 3]) -> TriConsts {
         let i = tri as usize;
-        let (p, p_error) = plane_point(v, b);
-        let mut ng = unit_normal(v);
         let n_idx = self.tri_normals[i];
-        let mut ns = if n_idx[0] == NO_INDEX {
-            ng
-        } else {
-            let n = b.interpolate(n_idx.map(|k| self.normals[k as usize]));
-            n.try_normalize().unwrap_or(ng)
-        };
-        if ng == Vec3::ZERO {
-            // A degenerate triangle: take the shading normal, or any unit vector.
-            ng = if ns == Vec3::ZERO { Vec3::Y } else { ns };
-            if ns == Vec3::ZERO {
-                ns = ng;
-            }
-        }
+        let normals = (n_idx[0] != NO_INDEX).then(|| n_idx.map(|k| self.normals[k as usize]));
         let material = self.tri_material[i];
         let uv_idx = self.tri_uvs[i];
-        let (uv, dpdu, dpdv) = if uv_idx[0] == NO_INDEX {
-            (None, Vec3::ZERO, Vec3::ZERO)
-        } else {
-            let t = uv_idx.map(|k| self.uvs[k as usize]);
-            let uv = b.interpolate2(t);
-            let (dpdu, dpdv) = if self.materials[usize::from(material)].bump.is_some() {
-                uv_derivatives(v, t)
-            } else {
-                (Vec3::ZERO, Vec3::ZERO)
-            };
-            (Some(uv), dpdu, dpdv)
+        let uvs = (uv_idx[0] != NO_INDEX).then(|| uv_idx.map(|k| self.uvs[k as usize]));
+        let (dpdu, dpdv) = match uvs {
+            Some(t) if self.materials[usize::from(material)].bump.is_some() => uv_derivatives(v, t),
+            _ => (Vec3::ZERO, Vec3::ZERO),
         };
-        SurfacePoint {
-            p,
-            p_error,
-            ng,
-            ns,
-            uv,
+        TriConsts {
+            tri,
+            v,
+            ng: unit_normal(v),
+            normals,
+            uvs,
             dpdu,
             dpdv,
             material,
             object: self.tri_object[i],
-            prim: tri,
         }
+    }
+
+    /// [`TriScene::view_surface`] for a run of samples that often see the
+    /// same triangle one after another (a row of the rasterizer's): what
+    /// depends on the triangle alone is kept in `last` and formed again
+    /// only when `tri` changes. The same operations on the same values, so
+    /// the same bits as `view_surface`.
+    #[must_use]
+    pub fn view_surface_after(
+        &self,
+        last: &mut Option<TriConsts>,
+        tri: u32,
+        o: DVec3,
+        d: DVec3,
+    ) -> (SurfacePoint, DVec3) {
+        let c = match last {
+            Some(c) if c.tri == tri => c,
+            _ => last.insert(self.tri_consts(tri, self.triangle(tri))),
+        };
+        let (b, p) = view_weights_of(c.v, o, d);
+        (c.surface(b), p)
     }
 
     /// Checks, in debug builds, the invariants every renderer indexes by
@@ -557,6 +563,54 @@ impl TriScene {
             + self.tri_uvs.len() * size_of::<[u32; 3]>()
             + self.tri_material.len() * size_of::<u16>()
             + self.tri_object.len() * size_of::<u32>()
+    }
+}
+
+/// What a triangle's shading inputs take from the triangle alone
+/// ([`TriScene::view_surface_after`] keeps it from sample to sample).
+#[derive(Clone, Copy, Debug)]
+pub struct TriConsts {
+    tri: u32,
+    v: [Vec3; 3],
+    /// `unit_normal(v)`: zero for a degenerate triangle.
+    ng: Vec3,
+    normals: Option<[Vec3; 3]>,
+    uvs: Option<[Vec2; 3]>,
+    dpdu: Vec3,
+    dpdv: Vec3,
+    material: u16,
+    object: u32,
+}
+
+impl TriConsts {
+    /// The shading inputs at weights `b` (see [`TriScene::surface_at`]).
+    #[inline]
+    fn surface(&self, b: Bary) -> SurfacePoint {
+        let (p, p_error) = plane_point(self.v, b);
+        let mut ng = self.ng;
+        let mut ns = match self.normals {
+            None => ng,
+            Some(n) => b.interpolate(n).try_normalize().unwrap_or(ng),
+        };
+        if ng == Vec3::ZERO {
+            // A degenerate triangle: take the shading normal, or any unit vector.
+            ng = if ns == Vec3::ZERO { Vec3::Y } else { ns };
+            if ns == Vec3::ZERO {
+                ns = ng;
+            }
+        }
+        SurfacePoint {
+            p,
+            p_error,
+            ng,
+            ns,
+            uv: self.uvs.map(|t| b.interpolate2(t)),
+            dpdu: self.dpdu,
+            dpdv: self.dpdv,
+            material: self.material,
+            object: self.object,
+            prim: self.tri,
+        }
     }
 }
 

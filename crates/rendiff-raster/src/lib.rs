@@ -1076,6 +1076,9 @@ fn shade_pass(
             // (packets per light: neighbours' rays toward one light share
             // their walk), then each sample with its answers.
             let mut batch = ShadeBatch::default();
+            // Neighbours in a row mostly see the same triangle: what the
+            // shading inputs take from it alone is kept from one to the next.
+            let mut last = None;
             for sx in 0..sw {
                 let i = (sy as usize) * w + sx as usize;
                 let tri = ids[i];
@@ -1085,7 +1088,7 @@ fn shade_pass(
                 // The weights the ray tracer shades with: the f64 camera
                 // ray of this sample against the visible triangle.
                 let ray64 = cam_rays.ray(sx, sy);
-                let (sp, p64) = scene.view_surface(tri, ray64.origin, ray64.dir);
+                let (sp, p64) = scene.view_surface_after(&mut last, tri, ray64.origin, ray64.dir);
                 let ray = ray64.to_f32();
                 let depth = cam.frame_depth(p64);
                 let Some(r) = &rays else {

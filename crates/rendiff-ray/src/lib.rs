@@ -26,7 +26,7 @@ use rendiff_core::color::Rgb;
 use rendiff_core::frame::{Frame, Sample};
 use rendiff_core::math::{DVec3, Ray, Ray64, Vec3, to_f64};
 use rendiff_core::shade::{self, ShadeContext, Shaded, SurfacePoint};
-use rendiff_core::tri_scene::{Prim, TriScene};
+use rendiff_core::tri_scene::{Prim, TriConsts, TriScene};
 
 /// Options of the ray tracer.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -169,6 +169,9 @@ impl Depth {
 /// One worker's view: the shadow rays it casts and its counters.
 struct Worker<'a, 's> {
     vis: ShadowRays<'a, 's>,
+    /// What the last triangle hit gives every hit on it
+    /// ([`TriScene::view_surface_after`]).
+    last: Option<TriConsts>,
     secondary: u64,
     by_level: [u64; LEVELS],
     straight: u64,
@@ -275,6 +278,7 @@ fn render_with(
         .par_bands(TILE, |band| {
             let mut w = Worker {
                 vis: ShadowRays::new(accel),
+                last: None,
                 secondary: 0,
                 by_level: [0; LEVELS],
                 straight: 0,
@@ -320,7 +324,7 @@ fn render_with(
                         batch.clear();
                         for k in 0..n {
                             prepared[k] = hits[k].map(|hit| {
-                                let p = tracer.prepare(&rays[k], hit);
+                                let p = tracer.prepare(&rays[k], hit, &mut w.last);
                                 let n = batch.add(&tracer.ctx, &p.0, p.2);
                                 (p, n)
                             });
@@ -373,11 +377,11 @@ impl Tracer<'_, '_> {
     /// What shading a primary hit needs: the surface point, the `f64` hit
     /// point, the view direction (the `f32` rounding of the ray's) and the
     /// primitive.
-    fn prepare(&self, ray64: &Ray64, hit: Hit) -> Prepared {
+    fn prepare(&self, ray64: &Ray64, hit: Hit, last: &mut Option<TriConsts>) -> Prepared {
         // `Camera::primary_ray` is this ray rounded to f32 (one rounding
         // of each part): derived here rather than computed again.
         let ray = ray64.to_f32();
-        let (sp, p64) = self.surface(&hit, ray64.origin, ray64.dir);
+        let (sp, p64) = self.surface(&hit, ray64.origin, ray64.dir, last);
         (sp, p64, ray.dir, hit.prim)
     }
 
@@ -419,11 +423,18 @@ impl Tracer<'_, '_> {
     }
 
     /// Shading inputs and the f64 hit point of a hit of the ray `(o, d)`
-    /// (the `f64` ray the hit was found on).
-    fn surface(&self, hit: &Hit, o: DVec3, d: DVec3) -> (SurfacePoint, DVec3) {
+    /// (the `f64` ray the hit was found on); `last` keeps what the last
+    /// triangle hit gives every hit on it.
+    fn surface(
+        &self,
+        hit: &Hit,
+        o: DVec3,
+        d: DVec3,
+        last: &mut Option<TriConsts>,
+    ) -> (SurfacePoint, DVec3) {
         let scene = self.scene;
         match scene.prim(hit.prim) {
-            Prim::Triangle(id) => scene.view_surface(id, o, d),
+            Prim::Triangle(id) => scene.view_surface_after(last, id, o, d),
             Prim::Analytic(k) => {
                 let p64 = o + d * hit.t64;
                 (scene.analytic_surface_at(k, p64), p64)
@@ -437,7 +448,7 @@ impl Tracer<'_, '_> {
         let Some(hit) = self.intersect(&Ray64::from(ray), w) else {
             return self.scene.background;
         };
-        let (sp, _) = self.surface(&hit, to_f64(ray.origin), to_f64(ray.dir));
+        let (sp, _) = self.surface(&hit, to_f64(ray.origin), to_f64(ray.dir), &mut w.last);
         let shaded = shade::shade(&self.ctx, &sp, ray.dir, &w.vis);
         shaded.local + self.children(w, &sp, &shaded, ray.dir, depth, inside)
     }
