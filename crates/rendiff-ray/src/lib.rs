@@ -381,7 +381,7 @@ impl Tracer<'_, '_> {
         // `Camera::primary_ray` is this ray rounded to f32 (one rounding
         // of each part): derived here rather than computed again.
         let ray = ray64.to_f32();
-        let (sp, p64) = self.surface(&hit, ray64.origin, ray64.dir, last);
+        let (sp, p64) = self.surface(&hit, ray64.origin, ray64.dir, Some(last));
         (sp, p64, ray.dir, hit.prim)
     }
 
@@ -423,19 +423,20 @@ impl Tracer<'_, '_> {
     }
 
     /// Shading inputs and the f64 hit point of a hit of the ray `(o, d)`
-    /// (the `f64` ray the hit was found on); `last` keeps what the last
-    /// triangle hit gives every hit on it.
+    /// (the `f64` ray the hit was found on); `last`, where given, keeps
+    /// what the last triangle hit gives every hit on it.
     fn surface(
         &self,
         hit: &Hit,
         o: DVec3,
         d: DVec3,
-        last: &mut Option<TriConsts>,
+        last: Option<&mut Option<TriConsts>>,
     ) -> (SurfacePoint, DVec3) {
         let scene = self.scene;
-        match scene.prim(hit.prim) {
-            Prim::Triangle(id) => scene.view_surface_after(last, id, o, d),
-            Prim::Analytic(k) => {
+        match (scene.prim(hit.prim), last) {
+            (Prim::Triangle(id), Some(last)) => scene.view_surface_after(last, id, o, d),
+            (Prim::Triangle(id), None) => scene.view_surface(id, o, d),
+            (Prim::Analytic(k), _) => {
                 let p64 = o + d * hit.t64;
                 (scene.analytic_surface_at(k, p64), p64)
             }
@@ -448,7 +449,8 @@ impl Tracer<'_, '_> {
         let Some(hit) = self.intersect(&Ray64::from(ray), w) else {
             return self.scene.background;
         };
-        let (sp, _) = self.surface(&hit, to_f64(ray.origin), to_f64(ray.dir), &mut w.last);
+        // (Secondary hits rarely repeat a triangle: no kept part.)
+        let (sp, _) = self.surface(&hit, to_f64(ray.origin), to_f64(ray.dir), None);
         let shaded = shade::shade(&self.ctx, &sp, ray.dir, &w.vis);
         shaded.local + self.children(w, &sp, &shaded, ray.dir, depth, inside)
     }
