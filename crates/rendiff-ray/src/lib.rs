@@ -169,8 +169,9 @@ impl Depth {
 /// One worker's view: the shadow rays it casts and its counters.
 struct Worker<'a, 's> {
     vis: ShadowRays<'a, 's>,
-    /// What the last triangle hit gives every hit on it
-    /// ([`TriScene::view_surface_after`]).
+    /// What the last triangle a primary ray hit gives every primary hit
+    /// on it ([`TriScene::view_surface_after`]; secondary hits, which
+    /// rarely repeat a triangle, take the direct path).
     last: Option<TriConsts>,
     secondary: u64,
     by_level: [u64; LEVELS],
