@@ -30,22 +30,34 @@ impl Sub8 {
     /// One pixel.
     pub const ONE: i64 = 1 << Self::FRAC_BITS;
 
-    /// Snaps a screen coordinate (pixels) to the nearest 1/256 pixel.
+    /// Snaps a screen coordinate (pixels) to the nearest 1/256 pixel, ties
+    /// to even.
     ///
     /// # Guarantees
     ///
-    /// The snapped value is within 2⁻⁹ px of `x` for |x| < 2⁴⁴.
+    /// For |x| < 2⁴³ the snapped value is the nearest multiple of 2⁻⁸ px
+    /// (within 2⁻⁹ px of `x`). Callers keep `x` in that range (the
+    /// rasterizer's guard band, ≤ 2²⁰ px; [`SnappedTri::with_rule`]'s check
+    /// against [`MAX_SNAPPED`]); outside it, NaN included, the value is
+    /// unspecified (a debug assertion), but the call does not panic.
     #[must_use]
-    #[expect(
-        clippy::cast_possible_truncation,
-        reason = "callers keep |x| within the guard band (≤ 2^20 px), far inside i64"
-    )]
     pub fn snap(x: f64) -> Sub8 {
-        // Round to nearest, ties to even, without a libm call: adding and
-        // subtracting 1.5·2⁵² leaves the integer part (exact for |v| < 2⁵¹).
+        // Round to nearest, ties to even, without a libm call: adding
+        // 1.5·2⁵² rounds `v` to an integer (exact for |v| < 2⁵¹), and the
+        // sum lies in [2⁵², 2⁵³), where one ulp is 1, so the sum's bits
+        // exceed 1.5·2⁵²'s by that integer. An integer subtraction instead
+        // of a float subtraction and a saturating conversion: callgrind,
+        // the 940 k bunny's raster frame 1 421.9 → 1 396.7 M, −1.8 % (a branch to keep the
+        // conversion for out-of-range values had cost +0.3 %).
         const MAGIC: f64 = 6_755_399_441_055_744.0;
         let v = x * 256.0;
-        Sub8(((v + MAGIC) - MAGIC) as i64)
+        debug_assert!(v.abs() < 2_251_799_813_685_248.0, "snap({x}) out of range");
+        Sub8(
+            (v + MAGIC)
+                .to_bits()
+                .cast_signed()
+                .wrapping_sub(MAGIC.to_bits().cast_signed()),
+        )
     }
 
     /// The value in pixels.
@@ -348,21 +360,27 @@ impl SnappedTri {
         mut span: impl FnMut(u32, Range<u32>),
     ) {
         let x0 = grid.pos(i64::from(cols.start));
-        let step = [
-            self.edges[0].a * grid.step,
-            self.edges[1].a * grid.step,
-            self.edges[2].a * grid.step,
+        let y0 = grid.pos(i64::from(rows.start));
+        let [p, q, r] = &self.edges;
+        // Each edge function stepped exactly (integers) along a row and
+        // from row to row, from its value at the box's first sample: the
+        // values the direct evaluation gives, so no overflow either.
+        let step = [p.a * grid.step, q.a * grid.step, r.a * grid.step];
+        let down = [p.b * grid.step, q.b * grid.step, r.b * grid.step];
+        let mut start = [
+            p.eval(x0, y0) - p.bias,
+            q.eval(x0, y0) - q.bias,
+            r.eval(x0, y0) - r.bias,
         ];
         for row in rows {
-            let y = grid.pos(i64::from(row));
-            let mut e = [0i64; 3];
-            for (k, ed) in self.edges.iter().enumerate() {
-                e[k] = ed.eval(x0, y) - ed.bias;
-            }
+            let mut e = start;
             let (mut first, mut last) = (u32::MAX, 0u32);
             for col in cols.clone() {
-                if e[0] >= 0 && e[1] >= 0 && e[2] >= 0 {
-                    first = first.min(col);
+                // All three ≥ 0 exactly when their bitwise or is.
+                if (e[0] | e[1] | e[2]) >= 0 {
+                    if first == u32::MAX {
+                        first = col;
+                    }
                     last = col;
                 }
                 e[0] += step[0];
@@ -372,6 +390,9 @@ impl SnappedTri {
             if first != u32::MAX {
                 span(row, first..last + 1);
             }
+            start[0] += down[0];
+            start[1] += down[1];
+            start[2] += down[2];
         }
     }
 
@@ -559,6 +580,74 @@ fn clip_range(lo: i64, hi: i64, within: &Range<u32>) -> Range<u32> {
 )]
 mod tests {
     use super::*;
+
+    /// `Sub8::snap` as first written: round half to even by adding and
+    /// subtracting 1.5·2⁵², then Rust's saturating conversion.
+    fn snap_by_subtraction(x: f64) -> i64 {
+        const MAGIC: f64 = 6_755_399_441_055_744.0;
+        let v = x * 256.0;
+        ((v + MAGIC) - MAGIC) as i64
+    }
+
+    #[test]
+    fn snap_is_the_rounded_subtraction_everywhere() {
+        // Ties at every eighth of a sub-pixel step, both signs, the
+        // borders of the range (|x|·256 = 2⁵¹ and its neighbours), zeros
+        // and subnormals, random bit patterns (those in range kept).
+        let mut xs = vec![
+            0.0,
+            -0.0,
+            f64::MIN_POSITIVE,
+            -f64::MIN_POSITIVE,
+            5e-324,
+            f64::MAX,
+            f64::MIN,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+        ];
+        for k in -4096i32..=4096 {
+            xs.push(f64::from(k) / 2048.0);
+            xs.push(f64::from(k) / 512.0 + 1.0 / 512.0);
+        }
+        let border = 2f64.powi(51) / 256.0;
+        for b in [border, -border, 2.0 * border, -2.0 * border] {
+            let mut y = b;
+            let mut z = b;
+            for _ in 0..64 {
+                xs.push(y);
+                xs.push(z);
+                y = y.next_up();
+                z = z.next_down();
+            }
+        }
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        for _ in 0..200_000 {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            // Any bit pattern, and guard-band sized values with ties.
+            xs.push(f64::from_bits(state));
+            #[expect(clippy::cast_precision_loss, reason = "a spread of test values")]
+            let v = (state >> 11) as f64 / (1u64 << 53) as f64 * 2e6 - 1e6;
+            xs.push(v);
+            xs.push((v * 512.0).round() / 512.0);
+        }
+        let mut checked = 0;
+        for x in xs {
+            // The contract's range: |x| < 2⁴³ px.
+            if (x * 256.0).abs() < 2f64.powi(51) {
+                assert_eq!(
+                    Sub8::snap(x).0,
+                    snap_by_subtraction(x),
+                    "snap({x:e}) ({:#x})",
+                    x.to_bits()
+                );
+                checked += 1;
+            }
+        }
+        assert!(checked > 400_000, "{checked}");
+    }
 
     /// Brute force: every sample tested with the exact point test.
     fn brute(t: &SnappedTri, g: &SampleGrid, w: u32, h: u32) -> Vec<(u32, u32)> {

@@ -138,8 +138,8 @@ struct Record {
     rows: (u32, u32),
     /// A back face (doubled signed area ≥ 0 before orientation).
     #[cfg_attr(
-        not(feature = "testing"),
-        expect(dead_code, reason = "read only by the testing hook `cover`")
+        not(any(test, feature = "testing")),
+        expect(dead_code, reason = "read only by the testing hook `cover` and a unit test")
     )]
     back: bool,
     /// The fill rule in effect.
@@ -287,12 +287,59 @@ pub fn render_into(
 /// The scene's vertices in homogeneous screen space, and the screen
 /// position of each (`HVert::screen`, formed once per vertex: a mesh's
 /// vertex is a corner of about six triangles, and the clip test and the
-/// setup of each asked for its two divisions). It derefs to the
-/// homogeneous vertices, which the plane set-up and the BSP read alone.
+/// setup of each asked for its two divisions), and where no clip can touch
+/// a triangle through it, its snapped position ([`SnapV`]). It derefs to
+/// the homogeneous vertices, which the plane set-up and the BSP read alone.
 #[derive(Debug, Default)]
 struct Projected {
     hv: Vec<HVert>,
     screen: Vec<(f64, f64)>,
+    snapped: Vec<SnapV>,
+}
+
+/// A vertex's screen position snapped to 1/256 pixel ([`Sub8::snap`]),
+/// where the vertex passes `clip_triangle`'s test for a whole triangle
+/// (between the near and far planes, inside the guard band); else
+/// [`SnapV::CLIP`]. A triangle whose three corners all have one is the
+/// whole triangle `clip_triangle` would pass on, and these are the values
+/// `push_snapped` would snap from its screen corners: the test and the
+/// snap are per vertex, so they are made once per vertex instead of at
+/// each of its (about six) triangles.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct SnapV {
+    x: i32,
+    y: i32,
+}
+
+impl SnapV {
+    /// A vertex that some clip plane may cut.
+    const CLIP: SnapV = SnapV {
+        x: i32::MIN,
+        y: i32::MIN,
+    };
+
+    /// The snapped position of the vertex `p` at `screen`, or
+    /// [`SnapV::CLIP`] (NaN coordinates included: every comparison fails).
+    fn of(p: &HVert, screen: (f64, f64), near: f64, far: f64) -> SnapV {
+        if p.z >= near && p.z <= far && guard_ok(screen) {
+            // Inside the guard band |x|, |y| < 2¹⁶ px: below 2²⁴ snapped.
+            #[expect(
+                clippy::cast_possible_truncation,
+                reason = "inside the guard band a snapped coordinate is below 2^24"
+            )]
+            SnapV {
+                x: Sub8::snap(screen.0).0 as i32,
+                y: Sub8::snap(screen.1).0 as i32,
+            }
+        } else {
+            SnapV::CLIP
+        }
+    }
+}
+
+/// Inside the guard band (where no guard plane clips).
+fn guard_ok(p: (f64, f64)) -> bool {
+    p.0.abs() < GUARD_PX && p.1.abs() < GUARD_PX
 }
 
 impl std::ops::Deref for Projected {
@@ -317,6 +364,14 @@ impl Projected {
         self.screen.clear();
         self.screen
             .par_extend(self.hv.par_iter().map(HVert::screen));
+        let (near, far) = (scene.camera.near(), scene.camera.far());
+        self.snapped.clear();
+        self.snapped.par_extend(
+            self.hv
+                .par_iter()
+                .zip(self.screen.par_iter())
+                .map(|(p, s)| SnapV::of(p, *s, near, far)),
+        );
     }
 }
 
@@ -551,10 +606,9 @@ fn clip_triangle(
 ) -> Clipped {
     let near = -ctx.clip_planes[0].c[4];
     let far = ctx.clip_planes[1].c[4];
-    let guard_ok = |p: &(f64, f64)| p.0.abs() < GUARD_PX && p.1.abs() < GUARD_PX;
     // The common case: between the near and far planes and inside the
-    // guard band.
-    if v.iter().all(|p| p.z >= near && p.z <= far) && screen.iter().all(guard_ok) {
+    // guard band (the test `SnapV::of` makes per vertex).
+    if v.iter().all(|p| p.z >= near && p.z <= far) && screen.iter().all(|p| guard_ok(*p)) {
         return Clipped::Whole;
     }
     if v.iter().all(|p| p.z < near) || v.iter().all(|p| p.z > far) {
@@ -564,7 +618,7 @@ fn clip_triangle(
     poly.extend_from_slice(v);
     for (k, plane) in ctx.clip_planes.iter().enumerate() {
         // Planes 0 and 1 are near and far; the guard band only where needed.
-        if k > 1 && poly.iter().all(|p| guard_ok(&p.screen())) {
+        if k > 1 && poly.iter().all(|p| guard_ok(p.screen())) {
             break;
         }
         clip_polygon(poly, plane, tmp);
@@ -636,6 +690,18 @@ fn push_snapped(
     out: &mut Vec<Record>,
 ) -> bool {
     let s = p.map(|(x, y)| (Sub8::snap(x).0, Sub8::snap(y).0));
+    record_snapped(s, tri, cull_back, ctx, out)
+}
+
+/// Records a snapped triangle if it can cover a sample; true when it is a
+/// back face culled.
+fn record_snapped(
+    s: [(i64, i64); 3],
+    tri: u32,
+    cull_back: bool,
+    ctx: &SetupCtx<'_>,
+    out: &mut Vec<Record>,
+) -> bool {
     let area2 = doubled_area(&s);
     let back = area2 >= 0;
     if area2 == 0 {
@@ -891,9 +957,18 @@ fn records(
             continue;
         }
         let idx = scene.tris[t];
+        let tri = u32::try_from(t).unwrap_or(u32::MAX);
+        // Corners no clip can touch: the whole triangle, snapped already.
+        let sv = idx.map(|i| hv.snapped[i as usize]);
+        if sv.iter().all(|c| *c != SnapV::CLIP) {
+            let s = sv.map(|c| (i64::from(c.x), i64::from(c.y)));
+            if record_snapped(s, tri, cull_back, &ctx, &mut out) {
+                culled.backface += 1;
+            }
+            continue;
+        }
         let v = idx.map(|i| hv.hv[i as usize]);
         let screen = idx.map(|i| hv.screen[i as usize]);
-        let tri = u32::try_from(t).unwrap_or(u32::MAX);
         if setup_triangle(
             (&v, &screen),
             tri,
@@ -1217,6 +1292,110 @@ mod tests {
     /// The stepped value the rasterizer interpolates at view depth `z`.
     fn stepped(m: &DepthMap, z: f64) -> f64 {
         if m.perspective { 1.0 / z } else { z }
+    }
+
+    /// The per-vertex snap (`SnapV`) is the clip's whole-triangle test and
+    /// `push_snapped`'s snap, made once per vertex: for triangles whose
+    /// corners sit on both sides of, and exactly on, the near and far
+    /// planes and the guard band (and NaN), all three corners have a
+    /// `SnapV` exactly where `clip_triangle` passes the triangle whole, and
+    /// then they record what `setup_triangle` records.
+    #[test]
+    fn per_vertex_snaps_are_the_whole_triangle_setup() {
+        let (near, far, w, h) = (0.25, 400.0, 320.0, 240.0);
+        let grid = SampleGrid::new(2);
+        let ctx = SetupCtx {
+            clip_planes: planes(near, far, w, h, GUARD_PX),
+            grid: &grid,
+            size: (640, 480),
+            rule: FillRule::TopLeft,
+        };
+        let zs = [
+            near.next_down(),
+            near,
+            near.next_up(),
+            1.0,
+            37.5,
+            far.next_down(),
+            far,
+            far.next_up(),
+            f64::NAN,
+        ];
+        let xs = [
+            -GUARD_PX,
+            (-GUARD_PX).next_up(),
+            -3.3,
+            0.0,
+            100.4,
+            319.9,
+            GUARD_PX.next_down(),
+            GUARD_PX,
+            f64::NAN,
+        ];
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut pick = |n: usize| {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            usize::try_from(state % n as u64).unwrap_or(0)
+        };
+        let (mut whole, mut clipped) = (0, 0);
+        let (mut poly, mut tmp) = (Vec::new(), Vec::new());
+        for _ in 0..60_000 {
+            let corner = |pick: &mut dyn FnMut(usize) -> usize| {
+                let z = zs[pick(zs.len())];
+                // Screen positions from the grid of values, or anywhere
+                // inside (with sub-pixel ties).
+                let sx = if pick(2) == 0 {
+                    xs[pick(xs.len())]
+                } else {
+                    f64::from(u32::try_from(pick(320 * 512)).unwrap_or(0)) / 512.0
+                };
+                let sy = if pick(2) == 0 {
+                    xs[pick(xs.len())]
+                } else {
+                    f64::from(u32::try_from(pick(240 * 512)).unwrap_or(0)) / 512.0
+                };
+                (
+                    HVert {
+                        xh: sx * z,
+                        yh: sy * z,
+                        w: z,
+                        z,
+                    },
+                    (sx, sy),
+                )
+            };
+            let c = [corner(&mut pick), corner(&mut pick), corner(&mut pick)];
+            let v = c.map(|(p, _)| p);
+            let screen = c.map(|(_, s)| s);
+            let sv = c.map(|(p, s)| SnapV::of(&p, s, near, far));
+            let all = sv.iter().all(|x| *x != SnapV::CLIP);
+            let is_whole = matches!(
+                clip_triangle(&v, &screen, &ctx, &mut poly, &mut tmp),
+                Clipped::Whole
+            );
+            assert_eq!(all, is_whole, "{v:?} {screen:?}");
+            if all {
+                whole += 1;
+                let (mut a, mut b) = (Vec::new(), Vec::new());
+                let s = sv.map(|x| (i64::from(x.x), i64::from(x.y)));
+                let culled_a = record_snapped(s, 7, true, &ctx, &mut a);
+                let culled_b =
+                    setup_triangle((&v, &screen), 7, true, &ctx, &mut poly, &mut tmp, &mut b);
+                assert_eq!(culled_a, culled_b);
+                assert_eq!(a.len(), b.len());
+                for (x, y) in a.iter().zip(&b) {
+                    assert_eq!((x.x, x.y, x.rows, x.back), (y.x, y.y, y.rows, y.back));
+                }
+            } else {
+                clipped += 1;
+            }
+        }
+        assert!(
+            whole > 5_000 && clipped > 5_000,
+            "{whole} whole, {clipped} clipped"
+        );
     }
 
     #[test]
