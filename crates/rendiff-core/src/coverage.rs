@@ -245,6 +245,7 @@ impl SnappedTri {
 
     /// A triangle from already snapped coordinates.
     #[must_use]
+    #[inline]
     pub fn from_snapped(s: [(i64, i64); 3], rule: FillRule) -> Option<SnappedTri> {
         let area2 = (s[1].0 - s[0].0) * (s[2].1 - s[0].1) - (s[2].0 - s[0].0) * (s[1].1 - s[0].1);
         if area2 == 0 {

@@ -107,6 +107,7 @@ impl Band<'_> {
     /// # Panics
     ///
     /// When `(sx, dy)` lies outside the band.
+    #[inline]
     pub fn set(&mut self, sx: u32, dy: u32, s: Sample) {
         assert!(sx < self.width && dy < self.rows, "sample outside the band");
         let i = (dy as usize) * (self.width as usize) + sx as usize;

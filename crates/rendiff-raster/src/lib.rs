@@ -139,7 +139,10 @@ struct Record {
     /// A back face (doubled signed area ≥ 0 before orientation).
     #[cfg_attr(
         not(any(test, feature = "testing")),
-        expect(dead_code, reason = "read only by the testing hook `cover` and a unit test")
+        expect(
+            dead_code,
+            reason = "read only by the testing hook `cover` and a unit test"
+        )
     )]
     back: bool,
     /// The fill rule in effect.
