@@ -25,7 +25,9 @@ use glam::Vec4;
 use pulp::WithSimd;
 
 use super::SimdPath;
-use super::triangle::{RayPrecomp, TriHit, TriPack, WalkRay, candidates, intersect};
+#[cfg(test)]
+use super::triangle::intersect;
+use super::triangle::{RayPrecomp, TriHit, TriPack, WalkRay, candidates, intersect_lane};
 use rendiff_core::math::{Aabb, DVec3, Ray64, Vec3, f32_at_least, gamma, to_f64};
 
 /// Child slot encoding: the high bit marks a leaf.
@@ -1096,7 +1098,7 @@ impl Bvh {
                     continue;
                 }
                 let s = *shear.get_or_insert_with(|| pre.shear64());
-                if let Some(h) = intersect(pre, s, &pack.triangle(lane), t_min, *t_max) {
+                if let Some(h) = intersect_lane(pre, s, pack, lane, t_min, *t_max) {
                     let stop = hit(id, h, t_max);
                     debug_assert!(
                         !SEGMENT || t_max.to_bits() == t_fixed.to_bits(),

@@ -174,20 +174,24 @@ impl RayPrecomp {
         };
         let mut kx = (kz + 1) % 3;
         let mut ky = (kx + 1) % 3;
+        // Components by position in an array (glam's `Index` is a chain of
+        // branches per access).
+        let da = d.to_array();
         // Keep the winding: swap when the dominant component is negative.
-        if d[kz] < 0.0 {
+        if da[kz] < 0.0 {
             std::mem::swap(&mut kx, &mut ky);
         }
-        let s = Vec3::new(d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]);
+        let s = Vec3::new(da[kx] / da[kz], da[ky] / da[kz], 1.0 / da[kz]);
         let m_shift = f32_at_least(2.0 * walk.dorigin / f64::from(GAMMA_10));
         // The distance bounds of [`candidates`] (derived there): `Δo`, and
         // `t_max·|d_z|` enlarged by γ₁₆ for the `f64` test's rounding of
         // `t`, plus `Δo`; each enlarged by 10⁻⁶ (> the `f32` rounding of
         // a translated coordinate, 2⁻²⁴ relative) and rounded up.
         let (z_above, z_below) = if SEGMENT {
+            let dz64 = ray.dir.to_array()[kz];
             let z_behind = f32_at_least(walk.dorigin * (1.0 + 1e-6));
             let beyond =
-                (ray.t_max * ray.dir[kz].abs() * (1.0 + gamma64(16)) + walk.dorigin) * (1.0 + 1e-6);
+                (ray.t_max * dz64.abs() * (1.0 + gamma64(16)) + walk.dorigin) * (1.0 + 1e-6);
             let z_beyond = if beyond.is_nan() {
                 f32::INFINITY
             } else {
@@ -196,7 +200,7 @@ impl RayPrecomp {
             // Along +z: behind is `Z < −z_behind`, past the end `Z > z_beyond`;
             // along −z the two swap sides. The side is the `f64` direction's
             // (its `f32` copy can round to −0 or +0 where it is below 10⁻⁴⁵).
-            if ray.dir[kz] < 0.0 {
+            if dz64 < 0.0 {
                 (z_behind, -z_beyond)
             } else {
                 (z_beyond, -z_behind)
@@ -221,7 +225,7 @@ impl RayPrecomp {
     #[inline(always)]
     pub(crate) fn shear64(&self) -> [f64; 3] {
         let [kx, ky, kz] = self.k;
-        let d = self.dir64;
+        let d = self.dir64.to_array();
         [d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]]
     }
 }
@@ -248,14 +252,6 @@ impl TriPack {
         lanes: 0,
         last: true,
     };
-
-    /// The triangle in `lane`.
-    #[must_use]
-    #[inline(always)]
-    pub(crate) fn triangle(&self, lane: usize) -> [Vec3; 3] {
-        self.v
-            .map(|c| Vec3::new(c[0][lane], c[1][lane], c[2][lane]))
-    }
 
     /// Puts a triangle in `lane`.
     #[cfg(test)]
@@ -359,22 +355,68 @@ pub struct TriHit {
 /// Intersects a ray with a triangle in `f64`, accepting
 /// `t_min ≤ t ≤ t_max` (inclusive at `t_max`, so a caller that orders
 /// equal distances by triangle id sees every tie) and `t` beyond the
-/// test's own rounding error of `t`.
+/// test's own rounding error of `t`. (The walks test a pack's lane,
+/// [`intersect_lane`]; this form is the tests'.)
+#[cfg(test)]
 #[must_use]
-#[inline(always)]
-#[expect(clippy::similar_names, reason = "the paper's names")]
 pub(crate) fn intersect(
     pre: &RayPrecomp,
-    [sx, sy, sz]: [f64; 3],
+    shear: [f64; 3],
     v: &[Vec3; 3],
     t_min: f64,
     t_max: f64,
 ) -> Option<TriHit> {
     let [kx, ky, kz] = pre.k;
-    let o = pre.origin64;
-    let shear = |p: Vec3| {
-        let a = to_f64(p) - o;
-        (a[kx] - sx * a[kz], a[ky] - sy * a[kz], a[kz])
+    let corner = |p: &Vec3| {
+        let p = p.to_array();
+        [p[kx], p[ky], p[kz]]
+    };
+    intersect_permuted(pre, shear, v.each_ref().map(corner), t_min, t_max)
+}
+
+/// [`intersect`] of the triangle in `lane` of `pack`, read from the pack
+/// directly: the same operations on the same values (each corner's
+/// coordinates taken by the ray's axis permutation), without forming the
+/// triangle's `Vec3` corners and indexing them by axis (glam's `Index`
+/// is a chain of branches per access).
+#[must_use]
+#[inline(always)]
+pub(crate) fn intersect_lane(
+    pre: &RayPrecomp,
+    shear: [f64; 3],
+    pack: &TriPack,
+    lane: usize,
+    t_min: f64,
+    t_max: f64,
+) -> Option<TriHit> {
+    let [kx, ky, kz] = pre.k;
+    let lane = lane & 3;
+    let corner = |c: &[Vec4; 3]| {
+        let at = |axis: usize| -> f32 { AsRef::<[f32; 4]>::as_ref(&c[axis])[lane] };
+        [at(kx), at(ky), at(kz)]
+    };
+    intersect_permuted(pre, shear, pack.v.each_ref().map(corner), t_min, t_max)
+}
+
+/// [`intersect`] of a triangle whose corners are given permuted by the
+/// ray's axes (`[p[kx], p[ky], p[kz]]` of each corner `p`).
+#[must_use]
+#[inline(always)]
+#[expect(clippy::similar_names, reason = "the paper's names")]
+fn intersect_permuted(
+    pre: &RayPrecomp,
+    [sx, sy, sz]: [f64; 3],
+    v: [[f32; 3]; 3],
+    t_min: f64,
+    t_max: f64,
+) -> Option<TriHit> {
+    let [kx, ky, kz] = pre.k;
+    let o = pre.origin64.to_array();
+    let (ox, oy, oz) = (o[kx], o[ky], o[kz]);
+    // Per axis `f64(p) − o` (the `f64` translation), then the shear.
+    let shear = |[px, py, pz]: [f32; 3]| {
+        let (x, y, z) = (f64::from(px) - ox, f64::from(py) - oy, f64::from(pz) - oz);
+        (x - sx * z, y - sy * z, z)
     };
     let (ax, ay, az) = shear(v[0]);
     let (bx, by, bz) = shear(v[1]);
