@@ -27,7 +27,9 @@ use pulp::WithSimd;
 use super::SimdPath;
 #[cfg(test)]
 use super::triangle::intersect;
-use super::triangle::{RayPrecomp, TriHit, TriPack, WalkRay, candidates, intersect_lane};
+use super::triangle::{
+    RayPrecomp, TriHit, TriPack, WalkRay, candidates, candidates2, intersect_lane,
+};
 use rendiff_core::math::{Aabb, DVec3, Ray64, Vec3, f32_at_least, gamma, to_f64};
 
 /// Child slot encoding: the high bit marks a leaf.
@@ -1116,6 +1118,54 @@ impl Bvh {
         }
     }
 
+    /// [`Bvh::leaf_hits`] (`SEGMENT`) of two rays with the same axis
+    /// permutation at once: each pack's edge and distance filter for both
+    /// in one pass ([`candidates2`], each ray's mask exactly its own
+    /// [`candidates`]), then each ray's survivors but its `skip` in `f64`
+    /// on its own fixed `t_max`; `hit(i, id, hit)` (ray `i` of the two)
+    /// returns `true` to stop that ray. Returns which rays stopped.
+    #[inline(always)]
+    fn leaf_hits_pair(
+        &self,
+        mut pres: [(&RayPrecomp, &mut Option<[f64; 3]>); 2],
+        first: usize,
+        rays: [(&Ray64, u32); 2],
+        mut hit: impl FnMut(usize, u32, TriHit) -> bool,
+    ) -> [bool; 2] {
+        let mut stopped = [false; 2];
+        let mut p = first;
+        loop {
+            let pack = &self.packs[p];
+            let (ma, mb) = candidates2::<true>(pres[0].0, pres[1].0, pack);
+            for (i, mut lanes) in [ma, mb].into_iter().enumerate() {
+                if stopped[i] {
+                    continue;
+                }
+                let (pre, shear) = &mut pres[i];
+                let (ray, skip) = rays[i];
+                while lanes != 0 {
+                    let lane = lanes.trailing_zeros() as usize;
+                    lanes &= lanes - 1;
+                    let id = self.ids[4 * p + lane];
+                    if id == skip {
+                        continue;
+                    }
+                    let s = *shear.get_or_insert_with(|| pre.shear64());
+                    if let Some(h) = intersect_lane(pre, s, pack, lane, ray.t_min, ray.t_max)
+                        && hit(i, id, h)
+                    {
+                        stopped[i] = true;
+                        break;
+                    }
+                }
+            }
+            if pack.last || stopped == [true; 2] {
+                return stopped;
+            }
+            p += 1;
+        }
+    }
+
     /// Walks the tree; `leaf.visit(first_pack, t_max)` tests a leaf and may
     /// shrink `t_max`; returning `true` stops the walk. With `ordered`,
     /// children are visited nearest first (closest hit); without, in any
@@ -1474,15 +1524,46 @@ impl Bvh {
                     }
                 }
             } else if node & LEAF != 0 {
+                let first = (node & !LEAF) as usize;
                 let mut m = active;
                 while m != 0 {
                     let r = m.trailing_zeros() as usize;
                     m &= m - 1;
                     let ray = ray_of(r);
-                    let (pre, shear) = pres[r]
-                        .get_or_insert_with(|| (RayPrecomp::of::<true>(ray, &walks[r]), None));
+                    pres[r].get_or_insert_with(|| (RayPrecomp::of::<true>(ray, &walks[r]), None));
+                    // Two rays with the same axes test the leaf together,
+                    // eight lanes wide ([`candidates2`]).
+                    if m != 0 {
+                        let r2 = m.trailing_zeros() as usize;
+                        pres[r2].get_or_insert_with(|| {
+                            (RayPrecomp::of::<true>(ray_of(r2), &walks[r2]), None)
+                        });
+                        if let Ok([Some((pa, sa)), Some((pb, sb))]) = pres.get_disjoint_mut([r, r2])
+                            && pa.k == pb.k
+                        {
+                            m &= m - 1;
+                            let stopped = self.leaf_hits_pair(
+                                [(pa, sa), (pb, sb)],
+                                first,
+                                [
+                                    (ray_of(r), skips[r.min(n - 1)]),
+                                    (ray_of(r2), skips[r2.min(n - 1)]),
+                                ],
+                                |i, id, h| accept(if i == 0 { r } else { r2 }, id, h),
+                            );
+                            if stopped[0] {
+                                alive &= !(1 << r);
+                            }
+                            if stopped[1] {
+                                alive &= !(1 << r2);
+                            }
+                            continue;
+                        }
+                    }
+                    let Some((pre, shear)) = pres[r].as_mut() else {
+                        continue;
+                    };
                     let mut t_max = ray.t_max;
-                    let first = (node & !LEAF) as usize;
                     let skip = skips[r.min(n - 1)];
                     if self.leaf_hits::<true>(
                         (pre, shear),

@@ -340,6 +340,117 @@ pub(crate) fn candidates<const SEGMENT: bool>(pre: &RayPrecomp, pack: &TriPack) 
     kept
 }
 
+/// [`candidates`] of two rays with the same axis permutation (`k`) on one
+/// pack at once, eight lanes wide (lanes 0–3 ray `a`, 4–7 ray `b`):
+/// written lane by lane for the vectoriser, each lane the same IEEE
+/// operations on the same operands as [`candidates`] (`min`/`max` as
+/// `minps`/`maxps`, no fused multiply-add), so each mask is exactly that
+/// ray's [`candidates`] (the distance test, which [`candidates`] skips
+/// when the edges drop every lane, only clears lanes the edges keep).
+#[must_use]
+#[inline(always)]
+pub(crate) fn candidates2<const SEGMENT: bool>(
+    a: &RayPrecomp,
+    b: &RayPrecomp,
+    pack: &TriPack,
+) -> (u32, u32) {
+    debug_assert_eq!(a.k, b.k, "one axis permutation");
+    let [kx, ky, kz] = a.k;
+    let two = |p: Vec4, q: Vec4| -> [f32; 8] {
+        let (p, q) = (p.to_array(), q.to_array());
+        [p[0], p[1], p[2], p[3], q[0], q[1], q[2], q[3]]
+    };
+    let (ox, oy, oz) = (
+        two(a.o4[kx], b.o4[kx]),
+        two(a.o4[ky], b.o4[ky]),
+        two(a.o4[kz], b.o4[kz]),
+    );
+    let (sx, sy) = (two(a.s4[0], b.s4[0]), two(a.s4[1], b.s4[1]));
+    let shift = two(a.m_shift, b.m_shift);
+    // The translated and sheared corners (a function, not a closure: a
+    // closure called three times is compiled out of line, without the
+    // instruction set of its caller).
+    #[inline(always)]
+    fn shear(
+        c: [[f32; 8]; 3],
+        [ox, oy, oz]: &[[f32; 8]; 3],
+        [sx, sy, shift]: &[[f32; 8]; 3],
+    ) -> [[f32; 8]; 5] {
+        let [cx, cy, cz] = c;
+        let mut out = [[0.0f32; 8]; 5];
+        for l in 0..8 {
+            let x = cx[l] - ox[l];
+            let y = cy[l] - oy[l];
+            let z = cz[l] - oz[l];
+            let m = x.abs() + y.abs() + z.abs() + shift[l];
+            let (xs, ys) = (x - sx[l] * z, y - sy[l] * z);
+            out[0][l] = xs;
+            out[1][l] = ys;
+            out[2][l] = m;
+            out[3][l] = xs.abs() + ys.abs();
+            out[4][l] = z;
+        }
+        out
+    }
+    let (o, k) = ([ox, oy, oz], [sx, sy, shift]);
+    let rows = |c: &[Vec4; 3]| [two(c[kx], c[kx]), two(c[ky], c[ky]), two(c[kz], c[kz])];
+    let [ax, ay, am, an, az] = shear(rows(&pack.v[0]), &o, &k);
+    let [bx, by, bm, bn, bz] = shear(rows(&pack.v[1]), &o, &k);
+    let [cx, cy, cm, cn, cz] = shear(rows(&pack.v[2]), &o, &k);
+    let (za, zb) = if SEGMENT {
+        (
+            [
+                a.z_above, a.z_above, a.z_above, a.z_above, b.z_above, b.z_above, b.z_above,
+                b.z_above,
+            ],
+            [
+                a.z_below, a.z_below, a.z_below, a.z_below, b.z_below, b.z_below, b.z_below,
+                b.z_below,
+            ],
+        )
+    } else {
+        ([f32::INFINITY; 8], [f32::NEG_INFINITY; 8])
+    };
+    let lane_min = |p: f32, q: f32| if p < q { p } else { q };
+    let lane_max = |p: f32, q: f32| if p > q { p } else { q };
+    // The edge function and its bound, as in [`candidates`].
+    #[inline(always)]
+    #[expect(clippy::too_many_arguments, reason = "two corners' four values")]
+    fn edge(ex: f32, ey: f32, em: f32, en: f32, sx: f32, sy: f32, sm: f32, sn: f32) -> (f32, f32) {
+        let p = ex * sy;
+        let q = ey * sx;
+        let bound = EDGE_PRODUCTS * (p.abs() + q.abs())
+            + EDGE_COORDS * (em * sn + sm * en + EDGE_SECOND * (sm * em));
+        let bound = if bound < MIN_TRUSTED {
+            f32::INFINITY
+        } else {
+            bound
+        };
+        (p - q, bound)
+    }
+    // −1 where the lane is dropped, +1 where kept (read by sign).
+    let mut verdict = [0.0f32; 8];
+    for l in 0..8 {
+        let (u, eu) = edge(cx[l], cy[l], cm[l], cn[l], bx[l], by[l], bm[l], bn[l]);
+        let (v, ev) = edge(ax[l], ay[l], am[l], an[l], cx[l], cy[l], cm[l], cn[l]);
+        let (w, ew) = edge(bx[l], by[l], bm[l], bn[l], ax[l], ay[l], am[l], an[l]);
+        let neg = (u < -eu) | (v < -ev) | (w < -ew);
+        let pos = (u > eu) | (v > ev) | (w > ew);
+        let mut drop = neg & pos;
+        if SEGMENT {
+            let above = lane_min(lane_min(az[l], bz[l]), cz[l]) > za[l];
+            let below = lane_max(lane_max(az[l], bz[l]), cz[l]) < zb[l];
+            drop |= above | below;
+        }
+        verdict[l] = if drop { -1.0 } else { 1.0 };
+    }
+    let dropped = Vec4::from_slice(&verdict[..4]).is_negative_bitmask()
+        | Vec4::from_slice(&verdict[4..]).is_negative_bitmask() << 4;
+    let lanes = (1u32 << pack.lanes) - 1;
+    let kept = !dropped;
+    (kept & lanes, (kept >> 4) & lanes)
+}
+
 /// A hit: distance and the barycentric weights (of v0, v1, v2) as the
 /// watertight test computes them.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -767,6 +878,85 @@ mod tests {
         assert!(
             hits > 50_000 && at_the_end > 10_000 && dropped > 10_000,
             "{hits} hits, {at_the_end} at the segment's end, {dropped} dropped"
+        );
+    }
+
+    /// [`candidates2`] gives each ray exactly its own [`candidates`]
+    /// mask, with and without the segment bounds: pairs of nearby rays
+    /// (the same axis permutation) against packs of one to four
+    /// triangles at every scale, aimed at the first triangle's edges and
+    /// corners so both verdicts occur.
+    #[test]
+    fn the_paired_filter_is_each_rays_own() {
+        let mut next = uniform(0x005e_ed0f_9a12_u64);
+        let (mut pairs, mut kept, mut dropped) = (0u32, 0u32, 0u32);
+        for case in 0..40_000u32 {
+            let scale = 10f64.powf(next() * 8.0 - 3.0);
+            let offset = 10f64.powf(next() * 5.0) * (next() - 0.5);
+            let c = DVec3::new(offset, -offset * 0.4, offset * 0.9);
+            let mut pack = TriPack::EMPTY;
+            pack.lanes = 1 + case % 4;
+            let mut tris = Vec::new();
+            for lane in 0..pack.lanes as usize {
+                let mut p =
+                    || to_f32(c + DVec3::new(next() - 0.5, next() - 0.5, next() - 0.5) * scale);
+                let tri = [p(), p(), p()];
+                pack.set(lane, tri);
+                tris.push(tri);
+            }
+            let v = tris[0].map(to_f64);
+            let target = v[0] + (v[1] - v[0]) * next() + (v[2] - v[0]) * (next() * 0.1);
+            let dir = DVec3::new(next() - 0.5, next() - 0.5, next() - 0.5).normalize();
+            let dist = 10f64.powf(next() * 6.0 - 3.0) * scale;
+            let ray = |d: DVec3, o: DVec3, t_max: f64| Ray64 {
+                origin: o,
+                dir: d,
+                t_min: 0.0,
+                t_max,
+            };
+            let a = ray(dir, target - dir * dist, dist * (0.5 + next()));
+            let d2 =
+                (dir + DVec3::new(next() - 0.5, next() - 0.5, next() - 0.5) * 0.05).normalize();
+            let o2 = a.origin + DVec3::new(next() - 0.5, next() - 0.5, next() - 0.5) * scale * 0.1;
+            let b = ray(
+                d2,
+                o2,
+                if case % 5 == 0 {
+                    f64::INFINITY
+                } else {
+                    dist * 2.0
+                },
+            );
+            let bound = dist * 4.0 + scale * 4.0;
+            let (pa, pb) = (RayPrecomp::new(&a, bound), RayPrecomp::new(&b, bound));
+            let (qa, qb) = (
+                RayPrecomp::of::<false>(&a, &WalkRay::new(&a, bound)),
+                RayPrecomp::of::<false>(&b, &WalkRay::new(&b, bound)),
+            );
+            if pa.k != pb.k {
+                continue;
+            }
+            pairs += 1;
+            let want = (
+                candidates::<true>(&pa, &pack),
+                candidates::<true>(&pb, &pack),
+            );
+            assert_eq!(candidates2::<true>(&pa, &pb, &pack), want, "case {case}");
+            let want_open = (
+                candidates::<false>(&qa, &pack),
+                candidates::<false>(&qb, &pack),
+            );
+            assert_eq!(
+                candidates2::<false>(&qa, &qb, &pack),
+                want_open,
+                "case {case}"
+            );
+            kept += (want.0 & 1) + (want.1 & 1);
+            dropped += u32::from(want.0 & 1 == 0) + u32::from(want.1 & 1 == 0);
+        }
+        assert!(
+            pairs > 20_000 && kept > 1_000 && dropped > 1_000,
+            "{pairs} pairs, {kept} kept, {dropped} dropped"
         );
     }
 
