@@ -1338,11 +1338,26 @@ impl Bvh {
                     self.traverse_from(node, &slabs[r], &mut t_prune[r], true, &mut leaves[r]);
                 }
             } else if node & LEAF != 0 {
+                let first = (node & !LEAF) as usize;
                 let mut m = active;
                 while m != 0 {
                     let r = m.trailing_zeros() as usize;
                     m &= m - 1;
-                    leaves[r].visit((node & !LEAF) as usize, &mut t_prune[r]);
+                    // Two rays with the same axes filter the leaf
+                    // together, eight lanes wide ([`ClosestLeaf::visit_pair`]).
+                    if m != 0 {
+                        let r2 = m.trailing_zeros() as usize;
+                        if let Ok([a, b]) = leaves.get_disjoint_mut([r, r2])
+                            && a.precomp().k == b.precomp().k
+                        {
+                            m &= m - 1;
+                            ClosestLeaf::visit_pair([a, b], first);
+                            t_prune[r] = f32_at_least(a.best_t);
+                            t_prune[r2] = f32_at_least(b.best_t);
+                            continue;
+                        }
+                    }
+                    leaves[r].visit(first, &mut t_prune[r]);
                 }
             } else {
                 let nd = &self.nodes[node as usize];
@@ -1710,6 +1725,68 @@ impl Leaf for ClosestLeaf<'_> {
         // Boxes are pruned in f32: never below the f64 distance.
         *t_prune = f32_at_least(self.best_t);
         false
+    }
+}
+
+impl ClosestLeaf<'_> {
+    /// The triangle test's constants, formed at the ray's first leaf.
+    #[inline(always)]
+    fn precomp(&mut self) -> &RayPrecomp {
+        let (ray, walk) = (self.ray, self.walk);
+        &self
+            .pre
+            .get_or_insert_with(|| (RayPrecomp::of::<false>(ray, walk), None))
+            .0
+    }
+
+    /// [`ClosestLeaf::visit`] of two rays with the same axis permutation
+    /// on the leaf starting at pack `first`: each pack's edge filter for
+    /// both at once ([`candidates2`], each ray's mask exactly its own
+    /// [`candidates`]; the closest-hit filter reads no `t_max`, so one
+    /// mask per pack serves every test of it), then each ray's survivors
+    /// in `f64` against its own best so far. Each ray tests the same
+    /// triangles in the same order (pack by pack, lanes ascending) with
+    /// the same `t_max` at each test as in [`Bvh::leaf_hits`]: the two
+    /// rays share only the filter, and their tests change nothing of the
+    /// other's (its `best`, `best_t`, shear). So each gets bit for bit the
+    /// hit of its own [`ClosestLeaf::visit`] (whose `skip`, [`NO_SKIP`],
+    /// is no triangle's id: there is no skip test here). The caller sets
+    /// the rays' `f32` pruning bounds afterwards, as `visit` does.
+    #[inline(always)]
+    fn visit_pair(leaves: [&mut Self; 2], first: usize) {
+        let [a, b] = leaves;
+        let bvh = a.bvh;
+        let (ray_a, walk_a) = (a.ray, a.walk);
+        let (ray_b, walk_b) = (b.ray, b.walk);
+        let (pa, sa) = a
+            .pre
+            .get_or_insert_with(|| (RayPrecomp::of::<false>(ray_a, walk_a), None));
+        let (pb, sb) = b
+            .pre
+            .get_or_insert_with(|| (RayPrecomp::of::<false>(ray_b, walk_b), None));
+        let mut p = first;
+        loop {
+            let pack = &bvh.packs[p];
+            let (ma, mb) = candidates2::<false>(pa, pb, pack);
+            for (mut lanes, pre, shear, ray, best, best_t) in [
+                (ma, &*pa, &mut *sa, ray_a, &mut a.best, &mut a.best_t),
+                (mb, &*pb, &mut *sb, ray_b, &mut b.best, &mut b.best_t),
+            ] {
+                while lanes != 0 {
+                    let lane = lanes.trailing_zeros() as usize;
+                    lanes &= lanes - 1;
+                    let id = bvh.ids[4 * p + lane];
+                    let s = *shear.get_or_insert_with(|| pre.shear64());
+                    if let Some(h) = intersect_lane(pre, s, pack, lane, ray.t_min, *best_t) {
+                        offer(best, best_t, id, h);
+                    }
+                }
+            }
+            if pack.last {
+                return;
+            }
+            p += 1;
+        }
     }
 }
 
@@ -2516,6 +2593,91 @@ mod tests {
             entered > 10_000 && kept < 8 * 20_000,
             "{entered} entered, {kept} kept"
         );
+    }
+
+    /// Packets whose rays pair up in the leaves
+    /// ([`ClosestLeaf::visit_pair`]) get each ray's single-ray hit bit for
+    /// bit (distance, id, barycentrics): a grid of quads split on their
+    /// diagonals (rays through shared edges and corners), duplicated
+    /// triangles before and after their originals in id order (hits at
+    /// equal `t` decided by id), larger coplanar triangles over some
+    /// quads (equal `t` on different triangles) and a tilted sheet
+    /// through the grid (hits in front of and behind it, so a ray's
+    /// `t_max` shrinks between its tests); from an origin where every ray
+    /// has the same axis permutation and one where a packet's rays
+    /// differ, in both kinds of tree, on both instruction sets.
+    #[test]
+    fn paired_closest_hits_are_each_rays_own() {
+        let mut tris: Vec<[Vec3; 3]> = Vec::new();
+        for q in 0..64u8 {
+            let (x, y) = (f32::from(q % 8), f32::from(q / 8));
+            let p = |dx: f32, dy: f32| Vec3::new(x + dx, y + dy, 1.0);
+            let lower = [p(0.0, 0.0), p(1.0, 0.0), p(1.0, 1.0)];
+            let upper = [p(0.0, 0.0), p(1.0, 1.0), p(0.0, 1.0)];
+            if q % 3 == 0 {
+                tris.push(lower);
+            }
+            tris.push(lower);
+            tris.push(upper);
+            if q % 3 == 1 {
+                tris.push(upper);
+            }
+            if q % 4 == 2 {
+                tris.push([p(-0.5, -0.5), p(1.5, -0.5), p(0.5, 1.5)]);
+            }
+            if q % 5 == 0 {
+                let s = |dx: f32, dy: f32| Vec3::new(x + dx, y + dy, 0.9 + 0.025 * (x + dx));
+                tris.push([s(0.0, 0.0), s(1.0, 0.0), s(0.0, 1.0)]);
+            }
+        }
+        let origins = [
+            DVec3::new(4.1, 3.9, -3.0),
+            DVec3::new(-3.0, 4.0, -3.0),
+            DVec3::new(4.0, 4.0, -8.0),
+        ];
+        let mut hits = 0;
+        let mut differing_axes = 0;
+        for tree in [Tree::Sah, Tree::Morton] {
+            let mut bvh = build_tree(&tris, tree);
+            for o in origins {
+                // 4×2 blocks of targets on a half-unit lattice: corners,
+                // edge midpoints, diagonal midpoints.
+                let mut rays = Vec::new();
+                for by in (0..18u8).step_by(2) {
+                    for bx in (0..20u8).step_by(4) {
+                        for j in by..by + 2 {
+                            for i in bx..bx + 4 {
+                                let t = DVec3::new(f64::from(i) * 0.5, f64::from(j) * 0.5, 1.0);
+                                rays.push(Ray64 {
+                                    origin: o,
+                                    dir: t - o,
+                                    t_min: 0.0,
+                                    t_max: f64::INFINITY,
+                                });
+                            }
+                        }
+                    }
+                }
+                for path in [SimdPath::Auto, SimdPath::Baseline] {
+                    bvh.set_simd(path);
+                    for chunk in rays.chunks(PACKET) {
+                        let mut got = vec![None; chunk.len()];
+                        bvh.intersect_packet(chunk, &mut got);
+                        let want: Vec<Option<BvhHit>> =
+                            chunk.iter().map(|r| bvh.intersect(r)).collect();
+                        assert_eq!(got, want, "{tree:?}, origin {o}");
+                        hits += want.iter().flatten().count();
+                        let k = |r: &Ray64| {
+                            let walk = WalkRay::new(r, bvh.reach(r));
+                            RayPrecomp::of::<false>(r, &walk).k
+                        };
+                        differing_axes += usize::from(chunk.iter().any(|r| k(r) != k(&chunk[0])));
+                    }
+                }
+            }
+        }
+        assert!(hits > 1000, "{hits} hits");
+        assert!(differing_axes > 10, "{differing_axes} mixed packets");
     }
 
     #[test]
