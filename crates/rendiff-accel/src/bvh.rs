@@ -2636,7 +2636,7 @@ mod tests {
             DVec3::new(4.0, 4.0, -8.0),
         ];
         let mut hits = 0;
-        let mut differing_axes = 0;
+        let (mut differing_axes, mut same_axes) = (0, 0);
         for tree in [Tree::Sah, Tree::Morton] {
             let mut bvh = build_tree(&tris, tree);
             for o in origins {
@@ -2665,19 +2665,29 @@ mod tests {
                         bvh.intersect_packet(chunk, &mut got);
                         let want: Vec<Option<BvhHit>> =
                             chunk.iter().map(|r| bvh.intersect(r)).collect();
-                        assert_eq!(got, want, "{tree:?}, origin {o}");
+                        // Bit for bit: the `Debug` text tells −0.0 from +0.0,
+                        // which `PartialEq` on the floats would not.
+                        assert_eq!(
+                            format!("{got:?}"),
+                            format!("{want:?}"),
+                            "{tree:?}, origin {o}"
+                        );
                         hits += want.iter().flatten().count();
                         let k = |r: &Ray64| {
                             let walk = WalkRay::new(r, bvh.reach(r));
                             RayPrecomp::of::<false>(r, &walk).k
                         };
-                        differing_axes += usize::from(chunk.iter().any(|r| k(r) != k(&chunk[0])));
+                        let mixed = chunk.iter().any(|r| k(r) != k(&chunk[0]));
+                        differing_axes += usize::from(mixed);
+                        same_axes += usize::from(!mixed && chunk.len() > 1);
                     }
                 }
             }
         }
         assert!(hits > 1000, "{hits} hits");
         assert!(differing_axes > 10, "{differing_axes} mixed packets");
+        // Packets whose rays can all pair up.
+        assert!(same_axes > 100, "{same_axes} packets of one axis order");
     }
 
     #[test]
