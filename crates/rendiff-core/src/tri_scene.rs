@@ -465,6 +465,8 @@ impl TriScene {
             dpdv,
             material,
             object: self.tri_object[i],
+            from_origin: None,
+            again: false,
         }
     }
 
@@ -485,7 +487,7 @@ impl TriScene {
             Some(c) if c.tri == tri => c,
             _ => last.insert(self.tri_consts(tri, self.triangle(tri))),
         };
-        let (b, p) = view_weights_of(c.v, o, d);
+        let (b, p) = c.view_weights(o, d);
         (c.surface(b), p)
     }
 
@@ -629,9 +631,75 @@ pub struct TriConsts {
     dpdv: Vec3,
     material: u16,
     object: u32,
+    /// The parts of the view weights' plane test that depend on the
+    /// triangle and the ray's origin alone, for the origin they were formed
+    /// with (a perspective camera's rays all leave the eye).
+    from_origin: Option<FromOrigin>,
+    /// A sample has taken the view weights already: the next forms
+    /// `from_origin` (a triangle one ray sees, as most of a dense mesh's,
+    /// never pays for it).
+    again: bool,
+}
+
+/// `plane_barycentrics`'s values that do not depend on the direction, for
+/// one origin: the `f64` corners, `e₁ = v₁ − v₀`, `e₂ = v₂ − v₀`,
+/// `o − v₀` and `(o − v₀) × e₁`.
+#[derive(Clone, Copy, Debug)]
+struct FromOrigin {
+    /// The origin's bits (the key).
+    o: [u64; 3],
+    v: [DVec3; 3],
+    e1: DVec3,
+    e2: DVec3,
+    tv: DVec3,
+    q: DVec3,
 }
 
 impl TriConsts {
+    /// [`view_weights_of`] for this triangle, with the parts that depend on
+    /// the origin alone kept while the origin stays the same: the same
+    /// operations on the same values as `plane_barycentrics`, in the same
+    /// order, so the same bits.
+    #[inline]
+    fn view_weights(&mut self, o: DVec3, d: DVec3) -> (Bary, DVec3) {
+        if !self.again {
+            self.again = true;
+            return view_weights_of(self.v, o, d);
+        }
+        let key = o.to_array().map(f64::to_bits);
+        let m = match &mut self.from_origin {
+            Some(m) if m.o == key => m,
+            slot => {
+                let v = self.v.map(to_f64);
+                let e1 = v[1] - v[0];
+                let tv = o - v[0];
+                slot.insert(FromOrigin {
+                    o: key,
+                    v,
+                    e1,
+                    e2: v[2] - v[0],
+                    tv,
+                    q: tv.cross(e1),
+                })
+            }
+        };
+        let p = d.cross(m.e2);
+        let det = m.e1.dot(p);
+        let w = if det == 0.0 || !det.is_finite() {
+            [1.0 / 3.0; 3]
+        } else {
+            let inv = 1.0 / det;
+            let b1 = m.tv.dot(p) * inv;
+            let b2 = d.dot(m.q) * inv;
+            [1.0 - b1 - b2, b1, b2]
+        };
+        let b = Bary::from_f64(w);
+        let s = w[0] + w[1] + w[2];
+        let v = m.v;
+        let p = (v[0] * w[0] + v[1] * w[1] + v[2] * w[2]) / s;
+        (b, p)
+    }
+
     /// The triangle it belongs to.
     #[must_use]
     pub fn tri(&self) -> u32 {
