@@ -1123,7 +1123,11 @@ impl Bvh {
     /// in one pass ([`candidates2`], each ray's mask exactly its own
     /// [`candidates`]), then each ray's survivors but its `skip` in `f64`
     /// on its own fixed `t_max`; `hit(i, id, hit)` (ray `i` of the two)
-    /// returns `true` to stop that ray. Returns which rays stopped.
+    /// returns `true` to stop that ray. Returns which rays stopped. (Each
+    /// ray's lane loop is `leaf_hits`' written out again: shared through
+    /// one `#[inline(always)]` helper, callgrind gave `near_plane` and
+    /// `spheres` with the rasterizer +0.9 % and +1.0 %, and the closest-hit
+    /// pair's the 940 k bunny's ray frame +0.53 %.)
     #[inline(always)]
     fn leaf_hits_pair(
         &self,

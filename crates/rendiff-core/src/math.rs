@@ -259,21 +259,54 @@ impl Bary {
 /// take the weights they shade a camera-ray hit with from it
 /// (`TriScene::view_weights`), so the weights agree bit for bit.
 #[must_use]
+#[inline]
 pub fn plane_barycentrics(o: DVec3, d: DVec3, v: [DVec3; 3]) -> Option<([f64; 3], f64)> {
-    let e1 = v[1] - v[0];
-    let e2 = v[2] - v[0];
-    let p = d.cross(e2);
-    let det = e1.dot(p);
-    if det == 0.0 || !det.is_finite() {
-        return None;
+    PlaneFromOrigin::new(o, v).at(d)
+}
+
+/// The part of [`plane_barycentrics`] that depends on the triangle and the
+/// line's origin alone (`e₁ = v₁ − v₀`, `e₂ = v₂ − v₀`, `o − v₀` and
+/// `(o − v₀) × e₁`), so that lines from one origin (a perspective camera's
+/// rays) can share it; [`PlaneFromOrigin::at`] is the rest, the same
+/// operations on the same values either way.
+#[derive(Clone, Copy, Debug)]
+pub struct PlaneFromOrigin {
+    e1: DVec3,
+    e2: DVec3,
+    tv: DVec3,
+    q: DVec3,
+}
+
+impl PlaneFromOrigin {
+    /// The origin-only part for origin `o` and triangle `v`.
+    #[must_use]
+    #[inline]
+    pub fn new(o: DVec3, v: [DVec3; 3]) -> PlaneFromOrigin {
+        let e1 = v[1] - v[0];
+        let tv = o - v[0];
+        PlaneFromOrigin {
+            e1,
+            e2: v[2] - v[0],
+            tv,
+            q: tv.cross(e1),
+        }
     }
-    let inv = 1.0 / det;
-    let tv = o - v[0];
-    let b1 = tv.dot(p) * inv;
-    let q = tv.cross(e1);
-    let b2 = d.dot(q) * inv;
-    let t = e2.dot(q) * inv;
-    Some(([1.0 - b1 - b2, b1, b2], t))
+
+    /// [`plane_barycentrics`] of the line from this origin along `d`.
+    #[must_use]
+    #[inline]
+    pub fn at(&self, d: DVec3) -> Option<([f64; 3], f64)> {
+        let p = d.cross(self.e2);
+        let det = self.e1.dot(p);
+        if det == 0.0 || !det.is_finite() {
+            return None;
+        }
+        let inv = 1.0 / det;
+        let b1 = self.tv.dot(p) * inv;
+        let b2 = d.dot(self.q) * inv;
+        let t = self.e2.dot(self.q) * inv;
+        Some(([1.0 - b1 - b2, b1, b2], t))
+    }
 }
 
 /// An affine transform of an object: `p_world = m · p_object`.

@@ -12,8 +12,8 @@ use crate::analytic::{AnalyticKind, Placed};
 use crate::camera::Camera;
 use crate::color::Rgb;
 use crate::math::{
-    Aabb, Bary, DVec3, F32_EPS, Vec2, Vec3, f32_at_least, gamma64, plane_barycentrics, to_f32,
-    to_f64,
+    Aabb, Bary, DVec3, F32_EPS, PlaneFromOrigin, Vec2, Vec3, f32_at_least, gamma64,
+    plane_barycentrics, to_f32, to_f64,
 };
 use crate::shade::{Light, Material, ShadeContext, SurfacePoint};
 
@@ -641,25 +641,20 @@ pub struct TriConsts {
     again: bool,
 }
 
-/// `plane_barycentrics`'s values that do not depend on the direction, for
-/// one origin: the `f64` corners, `e₁ = v₁ − v₀`, `e₂ = v₂ − v₀`,
-/// `o − v₀` and `(o − v₀) × e₁`.
+/// [`PlaneFromOrigin`] for one origin (its bits, the key), with the `f64`
+/// corners it was formed from.
 #[derive(Clone, Copy, Debug)]
 struct FromOrigin {
-    /// The origin's bits (the key).
     o: [u64; 3],
     v: [DVec3; 3],
-    e1: DVec3,
-    e2: DVec3,
-    tv: DVec3,
-    q: DVec3,
+    plane: PlaneFromOrigin,
 }
 
 impl TriConsts {
-    /// [`view_weights_of`] for this triangle, with the parts that depend on
-    /// the origin alone kept while the origin stays the same: the same
-    /// operations on the same values as `plane_barycentrics`, in the same
-    /// order, so the same bits.
+    /// [`view_weights_of`] for this triangle, with the part that depends
+    /// on the origin alone ([`PlaneFromOrigin`]) kept while the origin
+    /// stays the same: the same operations on the same values, so the
+    /// same bits.
     #[inline]
     fn view_weights(&mut self, o: DVec3, d: DVec3) -> (Bary, DVec3) {
         if !self.again {
@@ -671,33 +666,14 @@ impl TriConsts {
             Some(m) if m.o == key => m,
             slot => {
                 let v = self.v.map(to_f64);
-                let e1 = v[1] - v[0];
-                let tv = o - v[0];
                 slot.insert(FromOrigin {
                     o: key,
                     v,
-                    e1,
-                    e2: v[2] - v[0],
-                    tv,
-                    q: tv.cross(e1),
+                    plane: PlaneFromOrigin::new(o, v),
                 })
             }
         };
-        let p = d.cross(m.e2);
-        let det = m.e1.dot(p);
-        let w = if det == 0.0 || !det.is_finite() {
-            [1.0 / 3.0; 3]
-        } else {
-            let inv = 1.0 / det;
-            let b1 = m.tv.dot(p) * inv;
-            let b2 = d.dot(m.q) * inv;
-            [1.0 - b1 - b2, b1, b2]
-        };
-        let b = Bary::from_f64(w);
-        let s = w[0] + w[1] + w[2];
-        let v = m.v;
-        let p = (v[0] * w[0] + v[1] * w[1] + v[2] * w[2]) / s;
-        (b, p)
+        weights_and_point(m.v, m.plane.at(d))
     }
 
     /// The triangle it belongs to.
@@ -759,7 +735,14 @@ fn unit_normal([a, b, c]: [Vec3; 3]) -> Vec3 {
 #[inline]
 fn view_weights_of(v: [Vec3; 3], o: DVec3, d: DVec3) -> (Bary, DVec3) {
     let v = v.map(to_f64);
-    let w = plane_barycentrics(o, d, v).map_or([1.0 / 3.0; 3], |(w, _)| w);
+    weights_and_point(v, plane_barycentrics(o, d, v))
+}
+
+/// The shading weights and the `f64` point of a plane test's answer on the
+/// triangle `v` (the centroid where the line is parallel to the plane).
+#[inline]
+fn weights_and_point(v: [DVec3; 3], hit: Option<([f64; 3], f64)>) -> (Bary, DVec3) {
+    let w = hit.map_or([1.0 / 3.0; 3], |(w, _)| w);
     let b = Bary::from_f64(w);
     let s = w[0] + w[1] + w[2];
     let p = (v[0] * w[0] + v[1] * w[1] + v[2] * w[2]) / s;
