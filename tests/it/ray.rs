@@ -1039,6 +1039,116 @@ fn skipping_the_own_triangle_changes_no_shadow() {
     );
 }
 
+/// The shadow cache of `transmittance_packets` (the triangle that stopped
+/// a row's latest stopped ray, tried first and kept from call to call)
+/// answers every query as the single-ray walk does: rows of floor samples
+/// under a large occluder and a grid of small ones, toward two point
+/// lights (one in the large occluder's plane, which that occluder does not
+/// shadow) and along a parallel direction with segments that alternately
+/// end before and beyond the occluders; passed in runs of 1 to 20 queries,
+/// lights mixed within some runs, on one `ShadowRays` for the whole frame.
+#[test]
+fn the_shadow_cache_answers_as_the_walk() {
+    use rendiff::accel::ShadowRays;
+    use rendiff::color::Rgb;
+    use rendiff::shade::{Light, LightKind, ShadowQuery};
+    let quad = |a: Vec3, b: Vec3, c: Vec3, d: Vec3| [[a, b, c], [a, c, d]];
+    let mut tris: Vec<[Vec3; 3]> = Vec::new();
+    // The floor (triangles 0 and 1), the large occluder at y = 1 (2, 3).
+    tris.extend(quad(
+        Vec3::new(-4.0, 0.0, -4.0),
+        Vec3::new(-4.0, 0.0, 4.0),
+        Vec3::new(4.0, 0.0, 4.0),
+        Vec3::new(4.0, 0.0, -4.0),
+    ));
+    tris.extend(quad(
+        Vec3::new(-1.0, 1.0, -1.0),
+        Vec3::new(-1.0, 1.0, 1.0),
+        Vec3::new(1.0, 1.0, 1.0),
+        Vec3::new(1.0, 1.0, -1.0),
+    ));
+    // A 12 × 12 grid of small quads at y = 2, with gaps between them.
+    for i in 0..12 {
+        for j in 0..12 {
+            let (x, z) = (0.5 + 0.25 * i as f32, -1.5 + 0.25 * j as f32);
+            tris.extend(quad(
+                Vec3::new(x, 2.0, z),
+                Vec3::new(x, 2.0, z + 0.2),
+                Vec3::new(x + 0.2, 2.0, z + 0.2),
+                Vec3::new(x + 0.2, 2.0, z),
+            ));
+        }
+    }
+    let mut scene = TriScene::from_triangles(camera(), &tris);
+    for position in [Vec3::new(0.3, 5.0, 0.2), Vec3::new(-2.5, 1.0, 0.5)] {
+        scene.lights.push(Light {
+            kind: LightKind::Point { position },
+            color: Rgb::WHITE,
+            shadowless: false,
+            fade: None,
+        });
+    }
+    let accel = Accel::new(&scene, AccelOptions::default());
+    let rays = ShadowRays::new(&accel);
+    let parallel = Vec3::new(0.15, 1.0, 0.1).normalize();
+    let mut rows: Vec<ShadowQuery> = Vec::new();
+    for zi in 0..40 {
+        let z = -3.0 + 0.15 * zi as f32;
+        for light in [0usize, 1, 7] {
+            for xi in 0..64 {
+                let x = -3.5 + 0.11 * xi as f32;
+                let origin = Vec3::new(x, 1e-4, z);
+                let leaves = u32::from(x + z > 0.0);
+                let (dir, t_max) = match scene.lights.get(light).map(|l| l.kind) {
+                    Some(LightKind::Point { position }) => (
+                        (position - origin).normalize(),
+                        (position - origin).length(),
+                    ),
+                    // No such light: the query's own direction and end,
+                    // alternately short of the occluders and past them.
+                    _ => (parallel, if xi % 2 == 0 { 0.9 } else { 5.0 }),
+                };
+                rows.push(ShadowQuery {
+                    light,
+                    origin,
+                    dir,
+                    t_max,
+                    normal: Vec3::Y,
+                    leaves,
+                });
+            }
+        }
+    }
+    // Some runs mix the lights: queries swapped with the next light's.
+    let mut rng = crate::util::Rng(0x0cc1_0de5);
+    let n = rows.len();
+    for _ in 0..300 {
+        // The same sample of the next light's row.
+        let a = rng.below(n as u64) as usize;
+        rows.swap(a, (a + 64).min(n - 1));
+    }
+    let mut start = 0;
+    let (mut blocked, mut answers) = (0, 0);
+    while start < rows.len() {
+        let end = (start + 1 + rng.below(20) as usize).min(rows.len());
+        let run = &rows[start..end];
+        let mut got = vec![Rgb::WHITE; run.len()];
+        rays.transmittance_packets(run, &mut got);
+        for (q, g) in run.iter().zip(&got) {
+            let want = rays.transmittance(q);
+            assert_eq!(*g, want, "query {q:?}");
+            blocked += usize::from(want == Rgb::BLACK);
+            answers += 1;
+        }
+        start = end;
+    }
+    // Both answers are common (the cache is used and is left).
+    assert!(
+        blocked > answers / 10 && blocked < answers * 9 / 10,
+        "{blocked} of {answers}"
+    );
+}
+
 // ---- Build invariance -------------------------------------------------------
 
 /// Every bundled and hazard scene, ray traced through a BVH built by the

@@ -399,7 +399,16 @@ impl<'s> Accel<'s> {
 pub struct ShadowRays<'a, 's> {
     accel: &'a Accel<'s>,
     cast: std::sync::atomic::AtomicU64,
+    /// The shadow cache of [`ShadowRays::transmittance_packets`], kept
+    /// from call to call: per slot (light number mod [`OCCLUDER_SLOTS`]),
+    /// the light in the high word and, in the low, the triangle that
+    /// stopped its latest stopped ray; `u64::MAX` when there is none.
+    /// (Atomics, for `Sync`; an instance is one worker's, never contended.)
+    occluders: [std::sync::atomic::AtomicU64; OCCLUDER_SLOTS],
 }
+
+/// Lights whose last occluders a [`ShadowRays`] keeps at once.
+const OCCLUDER_SLOTS: usize = 4;
 
 impl<'a, 's> ShadowRays<'a, 's> {
     /// Shadow rays against the given structure.
@@ -408,6 +417,7 @@ impl<'a, 's> ShadowRays<'a, 's> {
         ShadowRays {
             accel,
             cast: std::sync::atomic::AtomicU64::new(0),
+            occluders: std::array::from_fn(|_| std::sync::atomic::AtomicU64::new(u64::MAX)),
         }
     }
 
@@ -423,6 +433,11 @@ impl<'a, 's> ShadowRays<'a, 's> {
     /// where every caster is an opaque triangle (then a ray's answer is
     /// whether it meets one, in any order), else one by one. Coherent
     /// queries (the samples of a row toward one light) share their walk.
+    /// Inside a shadow, the triangle that stopped the packet's last ray is
+    /// tried first on the next packet's rays toward the same light, up to
+    /// the first it does not stop (the shadow cache of Haines and
+    /// Greenberg's light buffer, kept per light from call to call); the
+    /// rest walk. The answers are the same: any accepted hit stops a ray.
     ///
     /// # Panics
     ///
@@ -450,26 +465,207 @@ impl<'a, 's> ShadowRays<'a, 's> {
         let mut lights = [None; bvh::PACKET];
         let mut skips = [bvh::NO_SKIP; bvh::PACKET];
         let mut blocked = [false; bvh::PACKET];
+        // The triangle that stopped each ray.
+        let mut stopper = [bvh::NO_SKIP; bvh::PACKET];
         let mut plane = None;
+        let mut cache = self.occluder(queries[0].light);
         for (qs, os) in queries.chunks(bvh::PACKET).zip(out.chunks_mut(bvh::PACKET)) {
             for (k, q) in qs.iter().enumerate() {
                 (rays[k], lights[k]) = shadow_ray(scene, q);
                 skips[k] = leaves_behind(scene, q, &rays[k], &mut plane);
             }
             let m = qs.len();
-            a.bvh.any_packet(
-                &rays[..m],
-                &skips[..m],
-                |r, id, _| {
-                    a.class[id as usize] != ShadowClass::None
-                        && !lights[r].is_some_and(|l| plane_through(scene, id, l))
-                },
-                &mut blocked[..m],
-            );
+            let accept = |k: usize, id: u32| {
+                a.class[id as usize] != ShadowClass::None
+                    && !lights[k].is_some_and(|l| plane_through(scene, id, l))
+            };
+            // A ray is stopped when some triangle but its skip meets it
+            // and is accepted. The cached triangle, met by the walks' own
+            // test (`triangle::meets`), answers for a ray it stops as the
+            // walk would: the walk reaches every triangle that test meets
+            // (`for_each_hit` is that test's whole set), and any accepted
+            // one stops the ray.
+            let cached = match &cache {
+                Some(c) => c.stops(
+                    qs,
+                    &rays[..m],
+                    &skips[..m],
+                    &accept,
+                    &mut blocked,
+                    &mut stopper,
+                ),
+                None => 0,
+            };
+            if cached == 0 {
+                a.bvh.any_packet(
+                    &rays[..m],
+                    &skips[..m],
+                    |k, id, _| {
+                        let stops = accept(k, id);
+                        if stops {
+                            stopper[k] = id;
+                        }
+                        stops
+                    },
+                    &mut blocked[..m],
+                );
+            } else if cached < m {
+                walk_rest(
+                    &a.bvh,
+                    (&rays[..m], &skips[..m]),
+                    &accept,
+                    &mut blocked,
+                    &mut stopper,
+                );
+            }
+            // The cache follows the row: the packet's last ray's triangle,
+            // where it is stopped (inside a shadow; at its edge, the next
+            // packet would mostly miss it).
+            cache = if blocked[m - 1] {
+                Occluder::after(cache, qs[m - 1].light, stopper[m - 1], scene)
+            } else {
+                None
+            };
             for (o, &b) in os.iter_mut().zip(&blocked[..m]) {
                 *o = if b { Rgb::BLACK } else { Rgb::WHITE };
             }
         }
+        self.keep_occluder(queries[queries.len() - 1].light, cache);
+    }
+
+    /// The kept occluder of `light` ([`ShadowRays::transmittance_packets`]).
+    #[inline(always)]
+    fn occluder(&self, light: usize) -> Option<Occluder> {
+        let entry =
+            self.occluders[light % OCCLUDER_SLOTS].load(std::sync::atomic::Ordering::Relaxed);
+        (light < u32::MAX as usize && entry >> 32 == light as u64).then(|| self.kept(light, entry))
+    }
+
+    /// The entry `entry` of `light`, with its triangle's corners.
+    #[inline(never)]
+    fn kept(&self, light: usize, entry: u64) -> Occluder {
+        #[expect(clippy::cast_possible_truncation, reason = "the low word")]
+        let id = entry as u32;
+        Occluder {
+            light,
+            id,
+            corners: self.accel.scene.triangle(id),
+        }
+    }
+
+    /// Keeps `cache` as the occluder of its light, or, where it is `None`,
+    /// forgets that of `light`. (A light number of 2³² − 1 or more is
+    /// never kept: its entry could not be told from none.)
+    #[inline(always)]
+    fn keep_occluder(&self, light: usize, cache: Option<Occluder>) {
+        let (light, entry) = match cache {
+            Some(c) if (c.light as u64) < u64::from(u32::MAX) => {
+                (c.light, ((c.light as u64) << 32) | u64::from(c.id))
+            }
+            Some(c) => (c.light, u64::MAX),
+            None => (light, u64::MAX),
+        };
+        self.occluders[light % OCCLUDER_SLOTS].store(entry, std::sync::atomic::Ordering::Relaxed);
+    }
+}
+
+/// The shadow cache's entry: the triangle that stopped the latest stopped
+/// ray toward `light`, and its corners.
+#[derive(Clone, Copy, Debug)]
+struct Occluder {
+    light: usize,
+    id: u32,
+    corners: [Vec3; 3],
+}
+
+impl Occluder {
+    /// The entry for `light` and triangle `id`: `cache` where it is that,
+    /// else formed.
+    #[inline(never)]
+    fn after(cache: Option<Occluder>, light: usize, id: u32, scene: &TriScene) -> Option<Occluder> {
+        match cache {
+            Some(c) if (c.light, c.id) == (light, id) => Some(c),
+            _ => Some(Occluder {
+                light,
+                id,
+                corners: scene.triangle(id),
+            }),
+        }
+    }
+
+    /// Marks in `blocked` (and `stopper`) the rays of a packet toward its
+    /// light that the triangle stops, clearing the others; returns how
+    /// many it stops. A ray is stopped when some triangle but its skip
+    /// meets it and is accepted: this triangle, met by the walks' own
+    /// test ([`triangle::meets`]), answers for a ray it stops as the walk
+    /// would, since the walk reaches every triangle that test meets
+    /// (`for_each_hit`'s set is that test's whole set) and any accepted
+    /// one stops the ray. (Out of line: inlined, it made the packets
+    /// without a cached triangle 1 % slower.)
+    #[inline(never)]
+    fn stops(
+        &self,
+        queries: &[ShadowQuery],
+        rays: &[Ray64],
+        skips: &[u32],
+        accept: &impl Fn(usize, u32) -> bool,
+        blocked: &mut [bool; bvh::PACKET],
+        stopper: &mut [u32; bvh::PACKET],
+    ) -> usize {
+        let mut count = 0;
+        for (k, ((q, ray), &skip)) in queries.iter().zip(rays).zip(skips).enumerate() {
+            blocked[k] = q.light == self.light
+                && skip != self.id
+                && triangle::meets(ray, &self.corners).is_some()
+                && accept(k, self.id);
+            if !blocked[k] {
+                // Past the shadow's edge: the rest walk (from here on,
+                // neighbours of a lit ray).
+                for b in &mut blocked[k + 1..rays.len()] {
+                    *b = false;
+                }
+                break;
+            }
+            stopper[k] = self.id;
+            count += 1;
+        }
+        count
+    }
+}
+
+/// The any-hit walk of the rays of a packet that `blocked` leaves
+/// unmarked, as a smaller packet; marks those it stops (and `stopper`).
+#[inline(never)]
+fn walk_rest(
+    bvh: &Bvh,
+    (rays, skips): (&[Ray64], &[u32]),
+    accept: &impl Fn(usize, u32) -> bool,
+    blocked: &mut [bool; bvh::PACKET],
+    stopper: &mut [u32; bvh::PACKET],
+) {
+    let mut of = [0usize; bvh::PACKET];
+    let mut n = 0;
+    for k in (0..rays.len()).filter(|&k| !blocked[k]) {
+        of[n] = k;
+        n += 1;
+    }
+    let rest_rays: [Ray64; bvh::PACKET] = std::array::from_fn(|j| rays[of[j].min(rays.len() - 1)]);
+    let rest_skips: [u32; bvh::PACKET] = std::array::from_fn(|j| skips[of[j].min(rays.len() - 1)]);
+    let mut walked = [false; bvh::PACKET];
+    bvh.any_packet(
+        &rest_rays[..n],
+        &rest_skips[..n],
+        |j, id, _| {
+            let stops = accept(of[j], id);
+            if stops {
+                stopper[of[j]] = id;
+            }
+            stops
+        },
+        &mut walked[..n],
+    );
+    for (&k, &w) in of[..n].iter().zip(&walked[..n]) {
+        blocked[k] = w;
     }
 }
 

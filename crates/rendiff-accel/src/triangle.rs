@@ -485,6 +485,25 @@ pub(crate) fn intersect(
     intersect_permuted(pre, shear, v.each_ref().map(corner), t_min, t_max)
 }
 
+/// The walks' test of one triangle (temporary copy for measurement)
+#[must_use]
+#[inline(always)]
+pub(crate) fn meets(ray: &Ray64, v: &[Vec3; 3]) -> Option<TriHit> {
+    let pre = RayPrecomp::of::<false>(ray, &WalkRay::new(ray, ray.t_max));
+    let [kx, ky, kz] = pre.k;
+    let corner = |p: &Vec3| {
+        let p = p.to_array();
+        [p[kx], p[ky], p[kz]]
+    };
+    intersect_permuted(
+        &pre,
+        pre.shear64(),
+        v.each_ref().map(corner),
+        ray.t_min,
+        ray.t_max,
+    )
+}
+
 /// [`intersect`] of the triangle in `lane` of `pack`, read from the pack
 /// directly: the same operations on the same values (each corner's
 /// coordinates taken by the ray's axis permutation), without forming the
