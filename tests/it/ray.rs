@@ -1046,7 +1046,9 @@ fn skipping_the_own_triangle_changes_no_shadow() {
 /// lights (one in the large occluder's plane, which that occluder does not
 /// shadow) and along a parallel direction with segments that alternately
 /// end before and beyond the occluders; passed in runs of 1 to 20 queries,
-/// lights mixed within some runs, on one `ShadowRays` for the whole frame.
+/// lights mixed within some runs, on one `ShadowRays` for the whole frame;
+/// and rays straight up along the grid's edges, which lie in the planes
+/// its boxes end on (the walk must reach what the cache's test meets).
 #[test]
 fn the_shadow_cache_answers_as_the_walk() {
     use rendiff::accel::ShadowRays;
@@ -1117,6 +1119,32 @@ fn the_shadow_cache_answers_as_the_walk() {
                     leaves,
                 });
             }
+        }
+    }
+    // Rays straight up through each quad of the grid: a few through the
+    // inside of one of its triangles, then one along that triangle's edge
+    // on the quad's side, in the plane a box may end on, with the zero
+    // component's sign pointing out of it (the walk must reach what the
+    // cache's test meets there).
+    let up = |x: f32, z: f32, sx: f32| ShadowQuery {
+        light: 7,
+        origin: Vec3::new(x, 1.5, z),
+        dir: Vec3::new(sx * 0.0, 1.0, 0.0),
+        t_max: 10.0,
+        normal: Vec3::Y,
+        leaves: u32::MAX,
+    };
+    for i in 0..12 {
+        for j in 0..12 {
+            let (x0, z0) = (0.5 + 0.25 * i as f32, -1.5 + 0.25 * j as f32);
+            for k in 0..6 {
+                rows.push(up(x0 + 0.02, z0 + 0.08 + 0.015 * k as f32, 1.0));
+            }
+            rows.push(up(x0, z0 + 0.1, -1.0));
+            for k in 0..6 {
+                rows.push(up(x0 + 0.18, z0 + 0.04 + 0.015 * k as f32, 1.0));
+            }
+            rows.push(up(x0 + 0.2, z0 + 0.1, 1.0));
         }
     }
     // Some runs mix the lights: queries swapped with the next light's.

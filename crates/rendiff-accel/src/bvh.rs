@@ -27,6 +27,7 @@ use pulp::WithSimd;
 use super::SimdPath;
 #[cfg(test)]
 use super::triangle::intersect;
+use super::triangle::slab_dir;
 use super::triangle::{
     RayPrecomp, TriHit, TriPack, WalkRay, candidates, candidates2, intersect_lane,
 };
@@ -1983,10 +1984,12 @@ fn offer(best: &mut Option<BvhHit>, best_t: &mut f64, id: u32, h: TriHit) {
 /// One ray's constants of the slab test of a node's eight boxes.
 ///
 /// A zero direction component would give 0·∞ = NaN in the slab test: it
-/// is replaced by a tiny one (the box test stays conservative because
-/// `t_far` is enlarged and the triangle test uses the true direction).
-/// Boxes are inflated by the drift between the `f32` ray and the `f64` ray
-/// it stands for (zero when they are the same ray): the lower planes are
+/// is replaced by a tiny one ([`slab_dir`]; the triangle test uses the
+/// true direction). Boxes are inflated by the drift between the ray the
+/// slabs walk and the `f64` ray it stands for ([`WalkRay::inflate`], which
+/// counts that replacement: without it, a ray lying in a box's face with
+/// a zero component left the box at t = 0); zero when they are the same
+/// ray. The lower planes are
 /// met from the origin moved up by it, the upper planes from the origin
 /// moved down, rounded outward.
 #[derive(Clone, Copy, Debug)]
@@ -2021,9 +2024,15 @@ impl Slab {
     fn new(walk: &WalkRay) -> Slab {
         let ray = &walk.ray;
         let o = Vec4::new(ray.origin.x, ray.origin.y, ray.origin.z, 0.0);
+        // `slab_dir`, four lanes wide.
         let d = Vec4::new(ray.dir.x, ray.dir.y, ray.dir.z, 1.0);
         let tiny = Vec4::splat(1e-30);
         let d = Vec4::select(d.abs().cmplt(tiny), tiny.copysign(d), d);
+        debug_assert_eq!(
+            d.truncate(),
+            slab_dir(ray.dir),
+            "the direction WalkRay measured"
+        );
         let inv = Vec4::ONE / d;
         let (lo, hi) = if walk.inflate == 0.0 {
             (o, o)
@@ -2350,6 +2359,119 @@ mod tests {
             out.push([corner(), corner(), corner()]);
         }
         out
+    }
+
+    /// Rays lying in the planes of box faces, with components exactly
+    /// zero (of either sign): every walk meets exactly the triangles the
+    /// `f64` test meets, as for any other ray. Triangles with corners on a
+    /// unit lattice (so boxes end on lattice planes), in every
+    /// orientation; rays from lattice points along the axes and the
+    /// diagonals of the axis planes. Before `WalkRay` counted the slab
+    /// direction's tiny components in its drift, a ray along +x at y = 0
+    /// missed a triangle below it whose edge lies at y = 0 (its box ends
+    /// there; the slab left it at t = 0), though the `f64` test meets that
+    /// edge: the walks then disagreed with the flat loop.
+    #[test]
+    fn rays_in_box_faces_meet_what_the_test_meets() {
+        let mut tris: Vec<[Vec3; 3]> = Vec::new();
+        let p = |x: i16, y: i16, z: i16| Vec3::new(f32::from(x), f32::from(y), f32::from(z));
+        for i in 0..4i16 {
+            for j in 0..4i16 {
+                let (x, y) = (2 * i - 3, 2 * j - 3);
+                // Below, above and across the planes through the lattice.
+                tris.push([p(x, y, 0), p(x + 1, y, 0), p(x, y - 1, 1)]);
+                tris.push([p(x, y, 2), p(x, y + 1, 2), p(x - 1, y, 3)]);
+                tris.push([p(x, 0, y), p(x + 1, 1, y), p(x, 1, y + 1)]);
+                tris.push([p(0, x, y), p(1, x, y + 1), p(0, x + 1, y + 1)]);
+            }
+        }
+        let zeros = [0.0, -0.0];
+        let mut dirs = Vec::new();
+        for a in [1.0f64, -1.0] {
+            for z0 in zeros {
+                for z1 in zeros {
+                    dirs.push(DVec3::new(a, z0, z1));
+                    dirs.push(DVec3::new(z0, a, z1));
+                    dirs.push(DVec3::new(z0, z1, a));
+                    for b in [1.0f64, -1.0] {
+                        let h = std::f64::consts::FRAC_1_SQRT_2;
+                        dirs.push(DVec3::new(a * h, b * h, z0));
+                        dirs.push(DVec3::new(a * h, z0, b * h));
+                        dirs.push(DVec3::new(z0, a * h, b * h));
+                    }
+                }
+            }
+        }
+        let mut trees = [
+            build(&tris, false),
+            build_tree(&tris, Tree::Morton),
+            build(&tris, true),
+        ];
+        let (mut rays, mut met) = (0, 0);
+        // Every ray with its closest hit and whether it meets anything,
+        // for the packet walks below.
+        type Case = (Ray64, Option<(u32, f64)>, bool);
+        let mut cases: Vec<Case> = Vec::new();
+        for x in -5..=5 {
+            for y in -5..=5 {
+                for z in [-1, 0, 1, 2, 3] {
+                    for &dir in &dirs {
+                        let ray = Ray64 {
+                            origin: DVec3::new(f64::from(x), f64::from(y), f64::from(z)),
+                            dir,
+                            t_min: 0.0,
+                            t_max: f64::INFINITY,
+                        };
+                        let pre = RayPrecomp::new(&ray, f64::INFINITY);
+                        let every: Vec<u32> = (0..u32::try_from(tris.len()).unwrap())
+                            .filter(|&id| {
+                                intersect(
+                                    &pre,
+                                    pre.shear64(),
+                                    &tris[id as usize],
+                                    0.0,
+                                    f64::INFINITY,
+                                )
+                                .is_some()
+                            })
+                            .collect();
+                        let want = linear(&tris, &ray, trees[0].reach(&ray));
+                        for bvh in &trees {
+                            let mut all = Vec::new();
+                            bvh.for_each_hit(&ray, NO_SKIP, |id, _| {
+                                all.push(id);
+                                false
+                            });
+                            all.sort_unstable();
+                            assert_eq!(all, every, "{ray:?}");
+                            assert_eq!(bvh.intersect(&ray).map(|h| (h.id, h.t64)), want, "{ray:?}");
+                        }
+                        rays += 1;
+                        met += usize::from(!every.is_empty());
+                        cases.push((ray, want, !every.is_empty()));
+                    }
+                }
+            }
+        }
+        // The packet walks, on both instruction sets: the same answers.
+        for bvh in &mut trees {
+            for path in [SimdPath::Auto, SimdPath::Baseline] {
+                bvh.set_simd(path);
+                for chunk in cases.chunks(PACKET) {
+                    let rays: Vec<Ray64> = chunk.iter().map(|c| c.0).collect();
+                    let mut hits = vec![None; rays.len()];
+                    bvh.intersect_packet(&rays, &mut hits);
+                    let mut any = vec![false; rays.len()];
+                    bvh.any_packet(&rays, &vec![NO_SKIP; rays.len()], |_, _, _| true, &mut any);
+                    for ((c, h), a) in chunk.iter().zip(&hits).zip(&any) {
+                        assert_eq!(h.map(|h| (h.id, h.t64)), c.1, "{:?}", c.0);
+                        assert_eq!(*a, c.2, "{:?}", c.0);
+                    }
+                }
+            }
+        }
+        // Many rays meet an edge or a corner lying in a box's face.
+        assert!(met > rays / 10, "{met} of {rays} rays meet something");
     }
 
     fn build(tris: &[[Vec3; 3]], flat: bool) -> Bvh {

@@ -100,7 +100,15 @@ impl WalkRay {
         // NaN only for 0·∞, which the last `max` turns into 0).
         let largest = |v: DVec3| v.x.max(v.y).max(v.z);
         let dorigin = largest((to_f64(o) - ray.origin).abs());
-        let ddir = largest((to_f64(d) - ray.dir).abs());
+        // Against the direction the slab test walks (`slab_dir`: its
+        // components below 10⁻³⁰ made ±10⁻³⁰), not the `f32` copy: a ray
+        // lying in a box's face with a zero component would otherwise
+        // leave the box at t = 0 and miss what the `f64` test meets on
+        // that face (an edge of a triangle whose box ends there).
+        let mut ddir = largest((to_f64(d) - ray.dir).abs());
+        if d.abs().min_element() < 1e-30 {
+            ddir = ddir.max(largest((to_f64(slab_dir(d)) - ray.dir).abs()));
+        }
         let reach = (ddir * t_bound.min(ray.t_max).max(0.0)).max(0.0);
         WalkRay {
             ray: Ray {
@@ -113,6 +121,16 @@ impl WalkRay {
             dorigin,
         }
     }
+}
+
+/// The direction the slab test walks for the `f32` direction `d`: each
+/// component below 10⁻³⁰ in magnitude replaced by 10⁻³⁰ of its sign (a
+/// zero component would give 0·∞ = NaN in the slab test). [`WalkRay`]
+/// counts the change in its drift, so the boxes are inflated by it.
+#[inline(always)]
+pub(crate) fn slab_dir(d: Vec3) -> Vec3 {
+    let tiny = Vec3::splat(1e-30);
+    Vec3::select(d.abs().cmplt(tiny), tiny.copysign(d), d)
 }
 
 /// Per-ray constants of the watertight test: the `f64` ray that decides,
