@@ -985,7 +985,9 @@ impl Bvh {
     /// The farthest `t` at which `ray` can meet a triangle of the tree: a
     /// bound on the distance to the far side of the bounds' bounding
     /// sphere (the L1 norm of the offset from its centre is never below
-    /// the Euclidean one, and needs no square root).
+    /// the Euclidean one, and needs no square root). A distance is a `t`
+    /// for a unit direction, which every `Ray64` has (its contract): the
+    /// boxes' inflation ([`WalkRay`]) rests on it.
     #[inline(always)]
     fn reach(&self, ray: &Ray64) -> f64 {
         let (c, r) = self.sphere;
@@ -2027,14 +2029,13 @@ impl Slab {
         // `slab_dir`, four lanes wide.
         let d = Vec4::new(ray.dir.x, ray.dir.y, ray.dir.z, 1.0);
         let tiny = Vec4::splat(1e-30);
-        let d = Vec4::select(d.abs().cmplt(tiny), tiny.copysign(d), d);
-        debug_assert_eq!(
-            d.truncate(),
-            slab_dir(ray.dir),
-            "the direction WalkRay measured"
-        );
+        let small = d.abs().cmplt(tiny);
+        let d = Vec4::select(small, tiny.copysign(d), d);
+        debug_assert_eq!(d.truncate(), slab_dir(ray.dir), "the direction replaced");
         let inv = Vec4::ONE / d;
-        let (lo, hi) = if walk.inflate == 0.0 {
+        // The replaced components' drift (never w's, which is 1).
+        let inflate = walk.inflate + if small.any() { walk.replaced } else { 0.0 };
+        let (lo, hi) = if inflate == 0.0 {
             (o, o)
         } else {
             // Each coordinate moved by at least `inflate` whatever the
@@ -2042,7 +2043,7 @@ impl Slab {
             // `|o| + s` of the exact sum, which the `2⁻²²·|o|` term and
             // the relative margin on `inflate` cover (and `MIN_POSITIVE`
             // the subnormal range).
-            let s = Vec4::splat(walk.inflate * (1.0 + 1.0 / 1_048_576.0))
+            let s = Vec4::splat(inflate * (1.0 + 1.0 / 1_048_576.0))
                 + o.abs() * (1.0 / 4_194_304.0)
                 + Vec4::splat(f32::MIN_POSITIVE);
             (o + s, o - s)

@@ -82,6 +82,12 @@ pub(crate) struct WalkRay {
     /// How far the `f32` ray strays from the `f64` one up to the
     /// farthest `t` that matters (boxes are inflated by this).
     pub inflate: f32,
+    /// What [`WalkRay::inflate`] lacks where the slab test replaces a
+    /// direction component ([`slab_dir`]): the replaced direction strays
+    /// from the `f64` one by under 2.1·10⁻³⁰ per unit t (the replacement
+    /// and the component are each below 10⁻³⁰ and 1 ulp), so by this much
+    /// up to the farthest `t` that matters.
+    pub replaced: f32,
     /// The distance between the two origins (largest coordinate).
     dorigin: f64,
 }
@@ -100,16 +106,16 @@ impl WalkRay {
         // NaN only for 0·∞, which the last `max` turns into 0).
         let largest = |v: DVec3| v.x.max(v.y).max(v.z);
         let dorigin = largest((to_f64(o) - ray.origin).abs());
-        // Against the direction the slab test walks (`slab_dir`: its
-        // components below 10⁻³⁰ made ±10⁻³⁰), not the `f32` copy: a ray
-        // lying in a box's face with a zero component would otherwise
-        // leave the box at t = 0 and miss what the `f64` test meets on
-        // that face (an edge of a triangle whose box ends there).
-        let mut ddir = largest((to_f64(d) - ray.dir).abs());
-        if d.abs().min_element() < 1e-30 {
-            ddir = ddir.max(largest((to_f64(slab_dir(d)) - ray.dir).abs()));
-        }
-        let reach = (ddir * t_bound.min(ray.t_max).max(0.0)).max(0.0);
+        // (Against the `f32` direction; where the slab test replaces a
+        // component, `replaced` adds that one's drift: without it, a ray
+        // lying in a box's face with a zero component there left the box
+        // at t = 0 and missed what the `f64` test meets on that face, an
+        // edge of a triangle whose box ends there. It is added in
+        // `Slab::new`, which finds the replaced components anyway: a test
+        // here cost every ray about 1 %.)
+        let ddir = largest((to_f64(d) - ray.dir).abs());
+        let t_reach = t_bound.min(ray.t_max).max(0.0);
+        let reach = (ddir * t_reach).max(0.0);
         WalkRay {
             ray: Ray {
                 origin: o,
@@ -118,6 +124,7 @@ impl WalkRay {
                 t_max: f32_at_least(ray.t_max),
             },
             inflate: f32_at_least((dorigin + reach) * (1.0 + 1e-6)),
+            replaced: f32_at_least((2.1e-30 * t_reach).max(0.0) * (1.0 + 1e-6)),
             dorigin,
         }
     }
