@@ -1170,7 +1170,7 @@ fn the_shadow_cache_answers_as_the_walk() {
         }
         start = end;
     }
-    // Both answers are common (the cache is used and is left).
+    // Both answers are common, so runs fill, use and clear the cache.
     assert!(
         blocked > answers / 10 && blocked < answers * 9 / 10,
         "{blocked} of {answers}"

@@ -492,9 +492,9 @@ pub struct TriHit {
 /// `t_min ≤ t ≤ t_max` (inclusive at `t_max`, so a caller that orders
 /// equal distances by triangle id sees every tie) and `t` beyond the
 /// test's own rounding error of `t`. (The walks test a pack's lane,
-/// [`intersect_lane`]; this form is the tests'.)
-#[cfg(test)]
+/// [`intersect_lane`]; this form is the tests' and [`meets`]'.)
 #[must_use]
+#[inline(always)]
 pub(crate) fn intersect(
     pre: &RayPrecomp,
     shear: [f64; 3],
@@ -510,23 +510,17 @@ pub(crate) fn intersect(
     intersect_permuted(pre, shear, v.each_ref().map(corner), t_min, t_max)
 }
 
-/// The walks' test of one triangle (temporary copy for measurement)
+/// The walks' test of one triangle, given by its corners, for `ray` alone
+/// over its own `[t_min, t_max]`: [`intersect`] with the constants a walk
+/// forms for the ray ([`RayPrecomp::of`]; the `f64` test reads only its
+/// axis permutation, from the `f32` direction, and the `f64` ray), so the
+/// answer of [`intersect_lane`] on a pack holding those corners, bit for
+/// bit.
 #[must_use]
 #[inline(always)]
 pub(crate) fn meets(ray: &Ray64, v: &[Vec3; 3]) -> Option<TriHit> {
     let pre = RayPrecomp::of::<false>(ray, &WalkRay::new(ray, ray.t_max));
-    let [kx, ky, kz] = pre.k;
-    let corner = |p: &Vec3| {
-        let p = p.to_array();
-        [p[kx], p[ky], p[kz]]
-    };
-    intersect_permuted(
-        &pre,
-        pre.shear64(),
-        v.each_ref().map(corner),
-        ray.t_min,
-        ray.t_max,
-    )
+    intersect(&pre, pre.shear64(), v, ray.t_min, ray.t_max)
 }
 
 /// [`intersect`] of the triangle in `lane` of `pack`, read from the pack
