@@ -1283,3 +1283,278 @@ fn every_simd_path_renders_every_scene_bit_for_bit() {
         eprintln!("no AVX2 here: only the baseline path was run");
     }
 }
+
+// ---- The light buffer ---------------------------------------------------------
+
+/// The light buffer's answers are the walk's, bit for bit
+/// (`Accel::new` with `shadow_rays_per_light` high enough builds one per
+/// light): on scenes of boxes, a floor, a sloped sheet of small triangles
+/// and long thin ones, with point lights above them, among them, just
+/// off a triangle (nearer than the buffer's `η·S`, so tested on every
+/// ray), in a wall's plane, far away, and parallel lights (the queries'
+/// direction the light's own, or a different one, which the buffer must
+/// leave to the walk); from origins on the surfaces (nudged off as
+/// shading does, leaving their triangle), anywhere in and around the
+/// scene, on the cube faces' diagonals from the light (where a ray's face
+/// is a tie), and exactly below a triangle's corner.
+#[test]
+fn the_light_buffer_answers_as_the_walk() {
+    use rendiff::color::Rgb;
+    use rendiff::shade::{Light, LightKind, ShadowQuery};
+    let mut rng = crate::util::Rng(0x11_6b7b_0ff3);
+    let quad = |a: Vec3, b: Vec3, c: Vec3, d: Vec3| [[a, b, c], [a, c, d]];
+    let cube = |lo: Vec3, hi: Vec3| {
+        let p = |x: bool, y: bool, z: bool| {
+            Vec3::new(
+                if x { hi.x } else { lo.x },
+                if y { hi.y } else { lo.y },
+                if z { hi.z } else { lo.z },
+            )
+        };
+        let mut t = Vec::new();
+        for (a, b, c, d) in [
+            (
+                p(false, false, false),
+                p(false, true, false),
+                p(true, true, false),
+                p(true, false, false),
+            ),
+            (
+                p(false, false, true),
+                p(true, false, true),
+                p(true, true, true),
+                p(false, true, true),
+            ),
+            (
+                p(false, false, false),
+                p(false, false, true),
+                p(false, true, true),
+                p(false, true, false),
+            ),
+            (
+                p(true, false, false),
+                p(true, true, false),
+                p(true, true, true),
+                p(true, false, true),
+            ),
+            (
+                p(false, true, false),
+                p(false, true, true),
+                p(true, true, true),
+                p(true, true, false),
+            ),
+            (
+                p(false, false, false),
+                p(true, false, false),
+                p(true, false, true),
+                p(false, false, true),
+            ),
+        ] {
+            t.extend(quad(a, b, c, d));
+        }
+        t
+    };
+    let mut tris: Vec<[Vec3; 3]> = Vec::new();
+    tris.extend(quad(
+        Vec3::new(-6.0, 0.0, -6.0),
+        Vec3::new(-6.0, 0.0, 6.0),
+        Vec3::new(6.0, 0.0, 6.0),
+        Vec3::new(6.0, 0.0, -6.0),
+    ));
+    for k in 0..6 {
+        let x = -3.0 + 1.1 * k as f32;
+        let z = -2.0 + 0.7 * (k % 3) as f32;
+        tris.extend(cube(
+            Vec3::new(x, 0.0, z),
+            Vec3::new(x + 0.5, 0.4 + 0.3 * k as f32, z + 0.6),
+        ));
+    }
+    // A sloped sheet of small triangles (a crowded region of the buffer).
+    for i in 0..24 {
+        for j in 0..24 {
+            let (x, z) = (-2.0 + 0.125 * i as f32, 2.0 + 0.125 * j as f32);
+            let y = |x: f32, z: f32| 1.0 + 0.3 * x + 0.2 * z;
+            tris.extend(quad(
+                Vec3::new(x, y(x, z), z),
+                Vec3::new(x, y(x, z + 0.1), z + 0.1),
+                Vec3::new(x + 0.1, y(x + 0.1, z + 0.1), z + 0.1),
+                Vec3::new(x + 0.1, y(x + 0.1, z), z),
+            ));
+        }
+    }
+    // Long thin triangles, and a wall at x = 5.
+    for k in 0..8 {
+        let z = -4.0 + k as f32;
+        tris.push([
+            Vec3::new(-5.0, 0.5 + 0.1 * k as f32, z),
+            Vec3::new(5.0, 0.6, z + 0.01),
+            Vec3::new(5.0, 0.6 + 0.002 * k as f32, z + 0.02),
+        ]);
+    }
+    tris.extend(quad(
+        Vec3::new(5.0, 0.0, -5.0),
+        Vec3::new(5.0, 3.0, -5.0),
+        Vec3::new(5.0, 3.0, 5.0),
+        Vec3::new(5.0, 0.0, 5.0),
+    ));
+    let n_tris = tris.len();
+    let mut scene = TriScene::from_triangles(camera(), &tris);
+    let point = |position| Light {
+        kind: LightKind::Point { position },
+        color: Rgb::WHITE,
+        shadowless: false,
+        fade: None,
+    };
+    let points = [
+        Vec3::new(0.5, 6.0, 0.3),
+        Vec3::new(-1.0, 1.2, 0.1),
+        // 10⁻⁵ above a box's top, and 10⁻¹² and 10⁻³⁰ above the floor
+        // (nearer than η·S: tested on every ray).
+        Vec3::new(-2.8, 0.4 + 1e-5, -1.7),
+        Vec3::new(1.3, 1e-12, -4.1),
+        Vec3::new(-4.5, 1e-30, 4.2),
+        // In the wall's plane.
+        Vec3::new(5.0, 2.0, 0.0),
+        // Far away.
+        Vec3::new(3e4, 2e4, -1e4),
+        // On a box's corner's diagonals (ties between cube faces).
+        Vec3::new(-1.9, 1.0, -1.3),
+    ];
+    for p in points {
+        scene.lights.push(point(p));
+    }
+    let parallel = Vec3::new(-0.3, -1.0, 0.2).normalize();
+    scene.lights.push(Light {
+        kind: LightKind::Parallel {
+            direction: parallel,
+        },
+        color: Rgb::WHITE,
+        shadowless: false,
+        fade: None,
+    });
+    let buffered = Accel::new(
+        &scene,
+        AccelOptions {
+            shadow_rays_per_light: u64::MAX,
+            ..AccelOptions::default()
+        },
+    );
+    let walked = Accel::new(&scene, AccelOptions::default());
+    let (fast, slow) = (ShadowRays::new(&buffered), ShadowRays::new(&walked));
+    let n_lights = scene.lights.len();
+    let query = |light: usize, origin: Vec3, leaves: u32| {
+        let (dir, t_max) = match scene.lights[light].kind {
+            LightKind::Point { position } => {
+                let v = position - origin;
+                (v / v.length(), v.length())
+            }
+            LightKind::Parallel { direction } => (-direction, f32::INFINITY),
+        };
+        ShadowQuery {
+            light,
+            origin,
+            dir,
+            t_max,
+            normal: Vec3::Y,
+            leaves,
+        }
+    };
+    let mut queries = Vec::new();
+    for light in 0..n_lights {
+        // Origins on the surfaces, nudged off toward the light.
+        for _ in 0..3000 {
+            let t = rng.below(n_tris as u64) as usize;
+            let [a, b, c] = tris[t];
+            let (u, v) = (rng.rangef(0.0, 1.0), rng.rangef(0.0, 1.0));
+            let (u, v) = if u + v > 1.0 {
+                (1.0 - u, 1.0 - v)
+            } else {
+                (u, v)
+            };
+            let p = a + (b - a) * u + (c - a) * v;
+            let n = (b - a).cross(c - a).normalize_or_zero();
+            let q0 = query(light, p, t as u32);
+            let side = if n.dot(q0.dir) >= 0.0 { 1.0 } else { -1.0 };
+            let off = [0.0, 1e-6, 1e-4][rng.below(3) as usize];
+            queries.push(query(light, p + n * side * off, t as u32));
+        }
+        // Anywhere in and around the scene.
+        for _ in 0..1500 {
+            let p = Vec3::new(
+                rng.rangef(-7.0, 7.0),
+                rng.rangef(-1.0, 4.0),
+                rng.rangef(-7.0, 7.0),
+            );
+            queries.push(query(light, p, u32::MAX));
+        }
+        // Below corners, and on the diagonals of the light's cube.
+        if let LightKind::Point { position } = scene.lights[light].kind {
+            for _ in 0..300 {
+                let s = rng.rangef(0.05, 6.0);
+                let (sx, sz) = (
+                    if rng.below(2) == 0 { -1.0 } else { 1.0 },
+                    if rng.below(2) == 0 { -1.0 } else { 1.0 },
+                );
+                queries.push(query(
+                    light,
+                    position - Vec3::new(sx * s, s, sz * s),
+                    u32::MAX,
+                ));
+                queries.push(query(light, position - Vec3::new(sx * s, s, 0.0), u32::MAX));
+            }
+        }
+        for tri in &tris {
+            for corner in tri {
+                queries.push(query(light, *corner - Vec3::new(0.0, 0.25, 0.0), u32::MAX));
+            }
+        }
+    }
+    // The parallel light's queries along another direction: walked.
+    for _ in 0..200 {
+        let p = Vec3::new(rng.rangef(-5.0, 5.0), 0.01, rng.rangef(-5.0, 5.0));
+        let mut q = query(n_lights - 1, p, 0);
+        q.dir = Vec3::new(0.3, 1.0, 0.0).normalize();
+        queries.push(q);
+    }
+    let (mut blocked, mut lit) = (0usize, 0usize);
+    for run in queries.chunks(13) {
+        let mut got = vec![Rgb::WHITE; run.len()];
+        let mut want = vec![Rgb::WHITE; run.len()];
+        fast.transmittance_packets(run, &mut got);
+        slow.transmittance_packets(run, &mut want);
+        for ((q, g), w) in run.iter().zip(&got).zip(&want) {
+            assert_eq!(g, w, "query {q:?}");
+            assert_eq!(*w, slow.transmittance(q), "query {q:?}");
+            if *w == Rgb::BLACK {
+                blocked += 1;
+            } else {
+                lit += 1;
+            }
+        }
+    }
+    assert!(blocked > 3000 && lit > 3000, "{blocked} blocked, {lit} lit");
+}
+
+/// Every bundled and hazard scene, ray traced with light buffers and
+/// without, gives the same frame bit for bit.
+#[test]
+fn the_light_buffer_renders_every_scene_bit_for_bit() {
+    for (path, job) in every_scene_small() {
+        let frame = |shadow_rays_per_light| {
+            let accel = Accel::new(
+                &job.tri,
+                AccelOptions {
+                    geometry: job.settings.geometry,
+                    shadow_rays_per_light,
+                    ..AccelOptions::default()
+                },
+            );
+            ray_frame(&job, &accel)
+        };
+        assert!(
+            frame(0) == frame(u64::MAX),
+            "{}: the frames with and without light buffers differ",
+            path.display()
+        );
+    }
+}

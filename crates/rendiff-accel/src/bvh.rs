@@ -829,7 +829,7 @@ impl Bvh {
 
     /// Appends the packs of a leaf of the triangles `ids`, in that order;
     /// returns the index of its first pack.
-    fn emit_ids<F: Fn(u32) -> [Vec3; 3]>(&mut self, ids: &[u32], tri: &F) -> u32 {
+    pub(crate) fn emit_ids<F: Fn(u32) -> [Vec3; 3]>(&mut self, ids: &[u32], tri: &F) -> u32 {
         let first = u32::try_from(self.packs.len()).unwrap_or(u32::MAX);
         for chunk in ids.chunks(4) {
             // The pack's coordinates gathered in plain arrays (lane by
@@ -1119,6 +1119,30 @@ impl Bvh {
             }
             p += 1;
         }
+    }
+
+    /// Whether a triangle of the leaf starting at pack `first`, but
+    /// `skip`, meets `ray` and is accepted: the any-hit walk's test of one
+    /// leaf (the same filter and `f64` test, so the same triangles meet
+    /// the ray), for the light buffer's cells, whose leaves are packs of
+    /// a tree without nodes.
+    pub(crate) fn leaf_any(
+        &self,
+        ray: &Ray64,
+        skip: u32,
+        first: u32,
+        mut accept: impl FnMut(u32) -> bool,
+    ) -> bool {
+        let walk = WalkRay::new(ray, ray.t_max);
+        let pre = RayPrecomp::of::<true>(ray, &walk);
+        let mut t_max = ray.t_max;
+        self.leaf_hits::<true>(
+            (&pre, &mut None),
+            first as usize,
+            (ray.t_min, skip),
+            &mut t_max,
+            |id, _, _| accept(id),
+        )
     }
 
     /// [`Bvh::leaf_hits`] (`SEGMENT`) of two rays with the same axis

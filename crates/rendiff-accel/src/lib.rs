@@ -9,10 +9,12 @@
 #![warn(missing_docs, missing_debug_implementations)]
 
 mod bvh;
+mod light_buffer;
 mod triangle;
 
 use bvh::Bvh;
 pub use bvh::{BvhHit, BvhStats};
+use light_buffer::{Cell, LightBuffers};
 use rendiff_core::analytic::sphere::sphere_roots;
 use rendiff_core::color::Rgb;
 use rendiff_core::math::{DVec3, Ray64, Vec3, to_f64};
@@ -34,6 +36,19 @@ pub struct AccelOptions {
     pub build: BvhBuild,
     /// The instruction set of the ray queries.
     pub simd: SimdPath,
+    /// About how many shadow rays will be asked toward each light (0:
+    /// unknown). A light gets a light buffer (a grid of the triangles
+    /// seen from it, which answers most of its rays without a walk) where
+    /// that is at least [`AccelOptions::LIGHT_BUFFER_RAYS_PER_TRIANGLE`]
+    /// per triangle that casts a shadow: its build costs about as much
+    /// as that many walks save.
+    pub shadow_rays_per_light: u64,
+}
+
+impl AccelOptions {
+    /// Shadow rays per casting triangle from which a light buffer pays
+    /// (see [`AccelOptions::shadow_rays_per_light`]).
+    pub const LIGHT_BUFFER_RAYS_PER_TRIANGLE: u64 = 256;
 }
 
 impl Default for AccelOptions {
@@ -43,6 +58,7 @@ impl Default for AccelOptions {
             bvh: true,
             build: BvhBuild::Sah,
             simd: SimdPath::Auto,
+            shadow_rays_per_light: 0,
         }
     }
 }
@@ -100,6 +116,8 @@ pub struct Accel<'s> {
     /// analytic shape that casts): a shadow ray's answer is then whether
     /// it meets one, and rays can be answered in packets.
     opaque_triangles_only: bool,
+    /// The lights' light buffers (for opaque triangles only).
+    light_buffers: LightBuffers,
 }
 
 impl<'s> Accel<'s> {
@@ -150,6 +168,36 @@ impl<'s> Accel<'s> {
             && analytic
                 .iter()
                 .all(|&k| analytic_class[k] == ShadowClass::None);
+        let light_buffers = if opaque_triangles_only && opts.shadow_rays_per_light > 0 {
+            let casters = ids
+                .iter()
+                .filter(|&&id| class[id as usize] == ShadowClass::Opaque)
+                .count() as u64;
+            let pays = casters.saturating_mul(AccelOptions::LIGHT_BUFFER_RAYS_PER_TRIANGLE)
+                <= opts.shadow_rays_per_light;
+            let mut in_bvh = vec![false; scene.len()];
+            for &id in &ids {
+                in_bvh[id as usize] = true;
+            }
+            LightBuffers::new(
+                scene,
+                |l| pays && !scene.lights[l].shadowless,
+                |l, id| {
+                    // What `accept` takes: casting, and not in a plane
+                    // through the point light.
+                    in_bvh[id as usize]
+                        && class[id as usize] == ShadowClass::Opaque
+                        && match scene.lights[l].kind {
+                            rendiff_core::shade::LightKind::Point { position } => {
+                                !plane_through(scene, id, to_f64(position))
+                            }
+                            rendiff_core::shade::LightKind::Parallel { .. } => true,
+                        }
+                },
+            )
+        } else {
+            LightBuffers::default()
+        };
         Accel {
             scene,
             bvh,
@@ -158,6 +206,7 @@ impl<'s> Accel<'s> {
             analytic_class,
             any_caster,
             opaque_triangles_only,
+            light_buffers,
         }
     }
 
@@ -469,6 +518,7 @@ impl<'a, 's> ShadowRays<'a, 's> {
         let mut stopper = [bvh::NO_SKIP; bvh::PACKET];
         let mut plane = None;
         let mut cache = self.occluder(queries[0].light);
+        let buffered = !a.light_buffers.is_empty();
         for (qs, os) in queries.chunks(bvh::PACKET).zip(out.chunks_mut(bvh::PACKET)) {
             for (k, q) in qs.iter().enumerate() {
                 (rays[k], lights[k]) = shadow_ray(scene, q);
@@ -479,6 +529,19 @@ impl<'a, 's> ShadowRays<'a, 's> {
                 a.class[id as usize] != ShadowClass::None
                     && !lights[k].is_some_and(|l| plane_through(scene, id, l))
             };
+            if buffered {
+                by_buffer(
+                    a,
+                    (qs, &rays[..m], &lights[..m], &skips[..m]),
+                    &accept,
+                    &mut blocked,
+                    &mut cache,
+                );
+                for (o, &b) in os.iter_mut().zip(&blocked[..m]) {
+                    *o = if b { Rgb::BLACK } else { Rgb::WHITE };
+                }
+                continue;
+            }
             // The rays the cached triangle stops (`Occluder::stops`: why
             // that is the walk's answer), then the walk of the rest.
             let cached = match &cache {
@@ -629,6 +692,109 @@ impl Occluder {
         count
     }
 }
+
+/// Answers a packet's rays into `blocked` through the light buffers: a
+/// ray whose cell is empty is lit, one whose cell lists a few triangles
+/// is tested against them (the walks' leaf test), and the rest walk the
+/// tree as a smaller packet. (See `light_buffer`: why these are the
+/// walk's answers.)
+#[inline(never)]
+fn by_buffer(
+    a: &Accel<'_>,
+    (queries, rays, lights, skips): PacketRays<'_>,
+    accept: &impl Fn(usize, u32) -> bool,
+    blocked: &mut [bool; bvh::PACKET],
+    cache: &mut Option<Occluder>,
+) {
+    let lb = &a.light_buffers;
+    let mut of = [0usize; bvh::PACKET];
+    let mut n = 0;
+    for (k, ((q, ray), &light)) in queries.iter().zip(rays).zip(lights).enumerate() {
+        let cell = lb.cell(q.light, ray, light, q.dir);
+        let leaf = match cell {
+            Cell::Empty => {
+                blocked[k] = false;
+                continue;
+            }
+            Cell::Leaf(leaf) => {
+                // Lit without a test where the ray keeps clear of every
+                // plane of the cell's triangles (`CullPlane::clear_of`), as
+                // of the floor's other triangle from the floor.
+                if lb.clear_of_all(leaf, ray, skips[k]) {
+                    blocked[k] = false;
+                    continue;
+                }
+                Some(leaf)
+            }
+            Cell::Walk => None,
+        };
+        // The shadow cache first (`Occluder::stops`: a triangle the test
+        // meets and that is accepted stops the ray), then the cell's leaf
+        // or the walk.
+        if let Some(c) = cache
+            && c.light == q.light
+            && c.id != skips[k]
+            && triangle::meets(ray, &c.corners).is_some()
+            && accept(k, c.id)
+        {
+            blocked[k] = true;
+            continue;
+        }
+        let Some(leaf) = leaf else {
+            of[n] = k;
+            n += 1;
+            continue;
+        };
+        let mut stopper = bvh::NO_SKIP;
+        blocked[k] = lb
+            .leaves()
+            .leaf_any(ray, skips[k], lb.first_pack(leaf), |id| {
+                let stops = accept(k, id);
+                if stops {
+                    stopper = id;
+                }
+                stops
+            });
+        if blocked[k] {
+            *cache = Occluder::after(*cache, q.light, stopper, a.scene);
+        }
+    }
+    if n == 0 {
+        return;
+    }
+    let walk_rays: [Ray64; bvh::PACKET] = std::array::from_fn(|j| rays[of[j.min(n - 1)]]);
+    let walk_skips: [u32; bvh::PACKET] = std::array::from_fn(|j| skips[of[j.min(n - 1)]]);
+    let mut walked = [false; bvh::PACKET];
+    let mut stopper = [bvh::NO_SKIP; bvh::PACKET];
+    a.bvh.any_packet(
+        &walk_rays[..n],
+        &walk_skips[..n],
+        |j, id, _| {
+            let stops = accept(of[j], id);
+            if stops {
+                stopper[j] = id;
+            }
+            stops
+        },
+        &mut walked[..n],
+    );
+    for (&k, &w) in of[..n].iter().zip(&walked[..n]) {
+        blocked[k] = w;
+    }
+    // The cache follows the last walked ray's stopper, where it is stopped.
+    if walked[n - 1] {
+        *cache = Occluder::after(*cache, queries[of[n - 1]].light, stopper[n - 1], a.scene);
+    }
+}
+
+/// A packet's queries, their rays, their point lights' positions and
+/// their skipped triangles.
+type PacketRays<'p> = (
+    &'p [ShadowQuery],
+    &'p [Ray64],
+    &'p [Option<DVec3>],
+    &'p [u32],
+);
 
 /// The any-hit walk of the rays of a packet that `blocked` leaves
 /// unmarked, as a smaller packet; marks those it stops (and `stopper`).
@@ -824,6 +990,7 @@ fn plane_through(scene: &TriScene, tri: u32, light: DVec3) -> bool {
 
 /// A triangle's plane in `f64` for sign tests: `n = (v1 − v0) × (v2 −
 /// v0)` and what bounds the rounding of `n·Δ` ([`TriPlane::dot`]).
+#[derive(Clone, Copy, Debug)]
 struct TriPlane {
     v0: DVec3,
     n: DVec3,
@@ -850,9 +1017,26 @@ impl TriPlane {
 
     /// `n·delta` and the bound on its rounding (see [`plane_through`]):
     /// beyond it, its sign is the exact one.
+    #[inline(always)]
     fn dot(&self, delta: DVec3) -> (f64, f64) {
         let g = rendiff_core::math::gamma64(4);
         (self.n.dot(delta), 2.0 * g * self.weight.dot(delta.abs()))
+    }
+
+    /// `true` when `ray`'s origin lies strictly on one side of the plane
+    /// (or exactly on it) and its direction points strictly away from it,
+    /// each sign certain beyond its rounding: the `f64` test can then only
+    /// reject the triangle (see [`leaves_behind`]).
+    #[inline(always)]
+    fn left_behind(&self, ray: &Ray64) -> bool {
+        let (side, side_bound) = self.dot(ray.origin - self.v0);
+        let (along, along_bound) = self.dot(ray.dir);
+        // On the plane exactly (every term of `n·Δ` exact: a floor at y = 0,
+        // whose points' error bound is zero and so their offset), the line
+        // meets the plane at t = 0 itself, which the test rejects as well.
+        let on_plane = side == 0.0 && side_bound == 0.0;
+        let side_certain = side.abs() > side_bound;
+        along.abs() > along_bound && (on_plane || side_certain && (side > 0.0) == (along > 0.0))
     }
 }
 
@@ -885,16 +1069,11 @@ fn leaves_behind(
         Some((t, p)) if *t == tri => p,
         _ => &last.insert((tri, TriPlane::of(scene, tri))).1,
     };
-    let (side, side_bound) = plane.dot(ray.origin - plane.v0);
-    let (along, along_bound) = plane.dot(ray.dir);
-    // On the plane exactly (every term of `n·Δ` exact: a floor at y = 0,
-    // whose points' error bound is zero and so their offset), the line
-    // meets the plane at t = 0 itself, which the test rejects as well.
-    let on_plane = side == 0.0 && side_bound == 0.0;
-    let side_certain = side.abs() > side_bound;
-    let away =
-        along.abs() > along_bound && (on_plane || side_certain && (side > 0.0) == (along > 0.0));
-    if away { tri } else { bvh::NO_SKIP }
+    if plane.left_behind(ray) {
+        tri
+    } else {
+        bvh::NO_SKIP
+    }
 }
 
 /// `true` when a crossing of an analytic shape at `t` is the light itself:

@@ -1208,6 +1208,7 @@ pub(crate) fn shadow_accel_options(scene: &TriScene, ids: &[u32]) -> AccelOption
     let rays = u64::try_from(visible.saturating_mul(lights)).unwrap_or(u64::MAX);
     AccelOptions {
         build: BvhBuild::for_rays(rays, scene.len()),
+        shadow_rays_per_light: u64::try_from(visible).unwrap_or(u64::MAX),
         ..AccelOptions::default()
     }
 }

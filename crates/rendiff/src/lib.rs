@@ -401,6 +401,10 @@ impl Prepared {
                         geometry: self.settings.geometry,
                         bvh: self.plan.bvh,
                         build: self.plan.bvh_build,
+                        // Each camera sample's hit asks a light at most
+                        // once (its reflections and refractions more).
+                        shadow_rays_per_light: u64::from(self.tri.camera.sample_width())
+                            * u64::from(self.tri.camera.sample_height()),
                         ..AccelOptions::default()
                     },
                 );
