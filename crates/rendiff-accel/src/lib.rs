@@ -730,7 +730,8 @@ fn by_buffer(
         };
         // The shadow cache first (`Occluder::stops`: a triangle the test
         // meets and that is accepted stops the ray), then the cell's leaf
-        // or the walk.
+        // or the walk. (The cache's test and the leaf's sharing the ray's
+        // constants measured 0.3–0.8 % more on the buffered scenes.)
         if let Some(c) = cache
             && c.light == q.light
             && c.id != skips[k]
