@@ -40,15 +40,16 @@ pub struct AccelOptions {
     /// unknown). A light gets a light buffer (a grid of the triangles
     /// seen from it, which answers most of its rays without a walk) where
     /// that is at least [`AccelOptions::LIGHT_BUFFER_RAYS_PER_TRIANGLE`]
-    /// per triangle that casts a shadow: its build costs about as much
-    /// as that many walks save.
+    /// per triangle that casts a shadow: below that, its build (300 to
+    /// 2 000 instructions per triangle and light on the bundled scenes)
+    /// costs more than the walks it saves (ARCHITECTURE.md).
     pub shadow_rays_per_light: u64,
 }
 
 impl AccelOptions {
     /// Shadow rays per casting triangle from which a light buffer pays
     /// (see [`AccelOptions::shadow_rays_per_light`]).
-    pub const LIGHT_BUFFER_RAYS_PER_TRIANGLE: u64 = 256;
+    pub const LIGHT_BUFFER_RAYS_PER_TRIANGLE: u64 = 8;
 }
 
 impl Default for AccelOptions {
