@@ -1296,7 +1296,9 @@ fn every_simd_path_renders_every_scene_bit_for_bit() {
 /// leave to the walk); from origins on the surfaces (nudged off as
 /// shading does, leaving their triangle), anywhere in and around the
 /// scene, on the cube faces' diagonals from the light (where a ray's face
-/// is a tie), and exactly below a triangle's corner.
+/// is a tie), and exactly below a triangle's corner; with every caster
+/// opaque, and with every third triangle transparent (then the answer is
+/// the product of the crossings, which the cell's list must hold all of).
 #[test]
 fn the_light_buffer_answers_as_the_walk() {
     use rendiff::color::Rgb;
@@ -1432,15 +1434,6 @@ fn the_light_buffer_answers_as_the_walk() {
         shadowless: false,
         fade: None,
     });
-    let buffered = Accel::new(
-        &scene,
-        AccelOptions {
-            shadow_rays_per_light: u64::MAX,
-            ..AccelOptions::default()
-        },
-    );
-    let walked = Accel::new(&scene, AccelOptions::default());
-    let (fast, slow) = (ShadowRays::new(&buffered), ShadowRays::new(&walked));
     let n_lights = scene.lights.len();
     let query = |light: usize, origin: Vec3, leaves: u32| {
         let (dir, t_max) = match scene.lights[light].kind {
@@ -1516,23 +1509,57 @@ fn the_light_buffer_answers_as_the_walk() {
         q.dir = Vec3::new(0.3, 1.0, 0.0).normalize();
         queries.push(q);
     }
-    let (mut blocked, mut lit) = (0usize, 0usize);
-    for run in queries.chunks(13) {
-        let mut got = vec![Rgb::WHITE; run.len()];
-        let mut want = vec![Rgb::WHITE; run.len()];
-        fast.transmittance_packets(run, &mut got);
-        slow.transmittance_packets(run, &mut want);
-        for ((q, g), w) in run.iter().zip(&got).zip(&want) {
-            assert_eq!(g, w, "query {q:?}");
-            assert_eq!(*w, slow.transmittance(q), "query {q:?}");
-            if *w == Rgb::BLACK {
-                blocked += 1;
-            } else {
-                lit += 1;
+    // Opaque casters only (answered in packets), then with every third
+    // triangle transparent (answered one by one, the crossings' product).
+    for transparent in [false, true] {
+        let mut scene = scene.clone();
+        if transparent {
+            scene.materials.push(rendiff::shade::Material {
+                filter: 0.3,
+                transmit: 0.4,
+                pigment: rendiff::shade::Pigment::Color(Rgb::new(0.9, 0.5, 0.2)),
+                ..rendiff::shade::Material::default()
+            });
+            for (t, m) in scene.tri_material.iter_mut().enumerate() {
+                if t % 3 == 0 {
+                    *m = 1;
+                }
             }
         }
+        let buffered = Accel::new(
+            &scene,
+            AccelOptions {
+                shadow_rays_per_light: u64::MAX,
+                ..AccelOptions::default()
+            },
+        );
+        let walked = Accel::new(&scene, AccelOptions::default());
+        let (fast, slow) = (ShadowRays::new(&buffered), ShadowRays::new(&walked));
+        let (mut blocked, mut lit, mut between) = (0usize, 0usize, 0usize);
+        for run in queries.chunks(13) {
+            let mut got = vec![Rgb::WHITE; run.len()];
+            let mut want = vec![Rgb::WHITE; run.len()];
+            fast.transmittance_packets(run, &mut got);
+            slow.transmittance_packets(run, &mut want);
+            for ((q, g), w) in run.iter().zip(&got).zip(&want) {
+                assert_eq!(g, w, "query {q:?}");
+                assert_eq!(*w, slow.transmittance(q), "query {q:?}");
+                if *w == Rgb::BLACK {
+                    blocked += 1;
+                } else if *w == Rgb::WHITE {
+                    lit += 1;
+                } else {
+                    between += 1;
+                }
+            }
+        }
+        assert!(blocked > 3000 && lit > 3000, "{blocked} blocked, {lit} lit");
+        assert_eq!(
+            between > 3000,
+            transparent,
+            "{between} through transparent triangles"
+        );
     }
-    assert!(blocked > 3000 && lit > 3000, "{blocked} blocked, {lit} lit");
 }
 
 /// Every bundled and hazard scene, ray traced with light buffers and

@@ -1126,12 +1126,13 @@ impl Bvh {
     /// leaf (the same filter and `f64` test, so the same triangles meet
     /// the ray), for the light buffer's cells, whose leaves are packs of
     /// a tree without nodes.
+    /// (`accept(id, hit)`: the hit as `for_each_hit` gives it.)
     pub(crate) fn leaf_any(
         &self,
         ray: &Ray64,
         skip: u32,
         first: u32,
-        mut accept: impl FnMut(u32) -> bool,
+        mut accept: impl FnMut(u32, TriHit) -> bool,
     ) -> bool {
         let walk = WalkRay::new(ray, ray.t_max);
         let pre = RayPrecomp::of::<true>(ray, &walk);
@@ -1141,7 +1142,7 @@ impl Bvh {
             first as usize,
             (ray.t_min, skip),
             &mut t_max,
-            |id, _, _| accept(id),
+            |id, h, _| accept(id, h),
         )
     }
 

@@ -117,7 +117,7 @@ pub struct Accel<'s> {
     /// analytic shape that casts): a shadow ray's answer is then whether
     /// it meets one, and rays can be answered in packets.
     opaque_triangles_only: bool,
-    /// The lights' light buffers (for opaque triangles only).
+    /// The lights' light buffers (where every caster is a triangle).
     light_buffers: LightBuffers,
 }
 
@@ -169,10 +169,15 @@ impl<'s> Accel<'s> {
             && analytic
                 .iter()
                 .all(|&k| analytic_class[k] == ShadowClass::None);
-        let light_buffers = if opaque_triangles_only && opts.shadow_rays_per_light > 0 {
+        // Every caster a triangle (no analytic shape casts): a cell's
+        // list then holds every caster a ray of it can meet.
+        let triangles_only = analytic
+            .iter()
+            .all(|&k| analytic_class[k] == ShadowClass::None);
+        let light_buffers = if triangles_only && opts.shadow_rays_per_light > 0 {
             let casters = ids
                 .iter()
-                .filter(|&&id| class[id as usize] == ShadowClass::Opaque)
+                .filter(|&&id| class[id as usize] != ShadowClass::None)
                 .count() as u64;
             let pays = casters.saturating_mul(AccelOptions::LIGHT_BUFFER_RAYS_PER_TRIANGLE)
                 <= opts.shadow_rays_per_light;
@@ -187,7 +192,7 @@ impl<'s> Accel<'s> {
                     // What `accept` takes: casting, and not in a plane
                     // through the point light.
                     in_bvh[id as usize]
-                        && class[id as usize] == ShadowClass::Opaque
+                        && class[id as usize] != ShadowClass::None
                         && match scene.lights[l].kind {
                             rendiff_core::shade::LightKind::Point { position } => {
                                 !plane_through(scene, id, to_f64(position))
@@ -751,7 +756,7 @@ fn by_buffer(
         let mut stopper = bvh::NO_SKIP;
         blocked[k] = lb
             .leaves()
-            .leaf_any(ray, skips[k], lb.first_pack(leaf), |id| {
+            .leaf_any(ray, skips[k], lb.first_pack(leaf), |id, _| {
                 let stops = accept(k, id);
                 if stops {
                     stopper = id;
@@ -1101,20 +1106,32 @@ impl Visibility for ShadowRays<'_, '_> {
         // surface through the light itself is not an occluder.
         let mut crossings: Vec<(f64, u32, [f32; 3])> = Vec::new();
         let mut blocked = false;
-        a.bvh
-            .for_each_hit(&ray, leaves_behind(scene, q, &ray, &mut None), |id, h| {
-                let class = a.class[id as usize];
-                if class == ShadowClass::None || light.is_some_and(|l| plane_through(scene, id, l))
-                {
-                    return false;
-                }
-                if class == ShadowClass::Opaque {
-                    blocked = true;
-                    return true;
-                }
-                crossings.push((h.t64, id, h.b));
-                false
-            });
+        let skip = leaves_behind(scene, q, &ray, &mut None);
+        let mut visit = |id: u32, h: TriHit| {
+            let class = a.class[id as usize];
+            if class == ShadowClass::None || light.is_some_and(|l| plane_through(scene, id, l)) {
+                return false;
+            }
+            if class == ShadowClass::Opaque {
+                blocked = true;
+                return true;
+            }
+            crossings.push((h.t64, id, h.b));
+            false
+        };
+        // Through the light buffer where the light has one (every caster
+        // is then a triangle, and a cell's list holds each one the walk
+        // could meet, with the same hits: see `light_buffer`).
+        let lb = &a.light_buffers;
+        match lb.cell(q.light, &ray, light, q.dir) {
+            Cell::Empty => return Rgb::WHITE,
+            Cell::Leaf(leaf) if lb.clear_of_all(leaf, &ray, skip) => return Rgb::WHITE,
+            Cell::Leaf(leaf) => {
+                lb.leaves()
+                    .leaf_any(&ray, skip, lb.first_pack(leaf), &mut visit);
+            }
+            Cell::Walk => a.bvh.for_each_hit(&ray, skip, &mut visit),
+        }
         if blocked {
             return Rgb::BLACK;
         }

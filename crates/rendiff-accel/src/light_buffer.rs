@@ -10,9 +10,11 @@
 //!
 //! **Why the answer is the walk's.** An any-hit answer is whether *some*
 //! accepted triangle but the skipped one meets the ray by the walks' `f64`
-//! test (`triangle::intersect`); the order does not matter. So a cell's
-//! list gives the walk's answer when it holds every triangle whose test
-//! meets a ray of that cell. A ray meets a triangle by that test only where
+//! test (`triangle::intersect`); the order does not matter. With
+//! transparent casters it is the product over every crossing, sorted by
+//! distance; the same test gives the same crossings. So a cell's list
+//! gives the walk's answer when it holds every triangle whose test meets
+//! a ray of that cell. A ray meets a triangle by that test only where
 //! its `f64` line passes within the test's rounding of the triangle
 //! (`Δ`, below); the cell of a ray is found from its origin, and the
 //! triangles are entered in every cell their projection, widened by a
