@@ -768,6 +768,11 @@ fn by_buffer(
         }
     }
     if n == 0 {
+        // As in the walk's path, a packet whose last ray is lit clears the
+        // cache (at a shadow's edge, the next packet would mostly miss it).
+        if !blocked[queries.len() - 1] {
+            *cache = None;
+        }
         return;
     }
     let walk_rays: [Ray64; bvh::PACKET] = std::array::from_fn(|j| rays[of[j.min(n - 1)]]);
@@ -792,6 +797,9 @@ fn by_buffer(
     // The cache follows the last walked ray's stopper, where it is stopped.
     if walked[n - 1] {
         *cache = Occluder::after(*cache, queries[of[n - 1]].light, stopper[n - 1], a.scene);
+    }
+    if !blocked[queries.len() - 1] {
+        *cache = None;
     }
 }
 
