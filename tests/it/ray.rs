@@ -1562,6 +1562,40 @@ fn the_light_buffer_answers_as_the_walk() {
     }
 }
 
+/// The plan says where the ray tracer builds light buffers: at 8 or more
+/// camera samples per casting triangle (`painter_floor`: 76 800 for 50),
+/// not below (`dense`: 307 200 for 50 099), and not without shadow rays.
+#[test]
+fn the_plan_shows_the_light_buffer_rule() {
+    use rendiff::options::light_buffer_pays;
+    assert!(light_buffer_pays(400, 50));
+    assert!(!light_buffer_pays(399, 50));
+    assert!(!light_buffer_pays(0, 0));
+    assert!(!light_buffer_pays(u64::MAX - 1, u64::MAX));
+    let line = |name: &str| {
+        let job = load(name, &Overrides::default());
+        job.plan
+            .to_string()
+            .lines()
+            .find(|l| l.contains("light buffer"))
+            .map(str::to_string)
+            .unwrap_or_default()
+    };
+    assert!(
+        line("painter_floor").contains(
+            "light buffer           on   76800 camera samples per light for 50 casting triangles"
+        ),
+        "{}",
+        line("painter_floor")
+    );
+    assert!(
+        line("dense")
+            .contains("light buffer           off  307200 camera samples per light for 50099"),
+        "{}",
+        line("dense")
+    );
+}
+
 /// Every bundled and hazard scene, ray traced with light buffers and
 /// without, gives the same frame bit for bit.
 #[test]

@@ -48,8 +48,10 @@ pub struct AccelOptions {
 
 impl AccelOptions {
     /// Shadow rays per casting triangle from which a light buffer pays
-    /// (see [`AccelOptions::shadow_rays_per_light`]).
-    pub const LIGHT_BUFFER_RAYS_PER_TRIANGLE: u64 = 8;
+    /// (see [`AccelOptions::shadow_rays_per_light`]; the rule is
+    /// [`rendiff_core::options::light_buffer_pays`], which the plan shows).
+    pub const LIGHT_BUFFER_RAYS_PER_TRIANGLE: u64 =
+        rendiff_core::options::LIGHT_BUFFER_RAYS_PER_TRIANGLE;
 }
 
 impl Default for AccelOptions {
@@ -179,8 +181,8 @@ impl<'s> Accel<'s> {
                 .iter()
                 .filter(|&&id| class[id as usize] != ShadowClass::None)
                 .count() as u64;
-            let pays = casters.saturating_mul(AccelOptions::LIGHT_BUFFER_RAYS_PER_TRIANGLE)
-                <= opts.shadow_rays_per_light;
+            let pays =
+                rendiff_core::options::light_buffer_pays(opts.shadow_rays_per_light, casters);
             let mut in_bvh = vec![false; scene.len()];
             for &id in &ids {
                 in_bvh[id as usize] = true;

@@ -202,6 +202,21 @@ pub enum BvhBuild {
     Morton,
 }
 
+/// Shadow rays toward a light per triangle that casts a shadow from which
+/// a light buffer (Haines and Greenberg's grid of the triangles seen from
+/// the light) pays for its build (300 to 2 000 instructions per triangle
+/// and light on the bundled scenes): measured on the bundled scenes
+/// (ARCHITECTURE.md, "The light buffer").
+pub const LIGHT_BUFFER_RAYS_PER_TRIANGLE: u64 = 8;
+
+/// `true` when a light toward which about `rays` shadow rays will be asked
+/// gets a light buffer over `casters` casting triangles (see
+/// [`LIGHT_BUFFER_RAYS_PER_TRIANGLE`]).
+#[must_use]
+pub fn light_buffer_pays(rays: u64, casters: u64) -> bool {
+    rays > 0 && casters.saturating_mul(LIGHT_BUFFER_RAYS_PER_TRIANGLE) <= rays
+}
+
 impl BvhBuild {
     /// Below this many rays per triangle a BVH is built in Morton order.
     ///

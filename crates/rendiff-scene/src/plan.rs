@@ -103,6 +103,7 @@ impl Plan {
         let (bvh_build, build_decision) = decide_bvh_build(scene, bvh, shadows);
         let (frustum_cull, frustum_decision) = decide_frustum_cull(scene);
         let (backface_cull, backface_decision) = decide_backface_cull(scene);
+        let light_buffer_decision = decide_light_buffer(scene, shadows);
         Plan {
             shadows,
             ray_tree,
@@ -120,6 +121,7 @@ impl Plan {
                 build_decision,
                 frustum_decision,
                 backface_decision,
+                light_buffer_decision,
             ],
         }
     }
@@ -334,6 +336,40 @@ fn decide_bvh_build(scene: &TriScene, bvh: bool, shadows: bool) -> (BvhBuild, De
         },
     };
     (build, decision)
+}
+
+/// The ray tracer's light buffers (built by `Accel::new` by the rule
+/// of [`rendiff_core::options::light_buffer_pays`] for one shadow ray per
+/// camera sample and light, and only where every caster is a triangle:
+/// with analytic shapes that cast, `--geometry analytic` has none). The
+/// rasterizer applies the rule to its visible samples.
+fn decide_light_buffer(scene: &TriScene, shadows: bool) -> Decision {
+    let cam = &scene.camera;
+    let rays = u64::from(cam.sample_width()) * u64::from(cam.sample_height());
+    let casters = scene
+        .tri_object
+        .iter()
+        .filter(|&&o| !scene.objects[o as usize].no_shadow)
+        .count() as u64;
+    let per = rendiff_core::options::LIGHT_BUFFER_RAYS_PER_TRIANGLE;
+    let on = shadows && rendiff_core::options::light_buffer_pays(rays, casters);
+    Decision {
+        what: "light buffer",
+        on,
+        why: if shadows {
+            format!(
+                "{rays} camera samples per light for {casters} casting triangles ({} {per} per triangle: {})",
+                if on { "at or above" } else { "below" },
+                if on {
+                    "a grid of the triangles seen from each light answers most shadow rays without a walk"
+                } else {
+                    "its build would cost more than it saves"
+                }
+            )
+        } else {
+            "no shadow rays".into()
+        },
+    }
 }
 
 /// Frustum culling: per object, whether it lies entirely outside the view

@@ -402,9 +402,15 @@ impl Prepared {
                         bvh: self.plan.bvh,
                         build: self.plan.bvh_build,
                         // Each camera sample's hit asks a light at most
-                        // once (its reflections and refractions more).
-                        shadow_rays_per_light: u64::from(self.tri.camera.sample_width())
-                            * u64::from(self.tri.camera.sample_height()),
+                        // once (its reflections and refractions more);
+                        // none without shadow rays (the plan's "light
+                        // buffer" line applies the same rule).
+                        shadow_rays_per_light: if self.plan.shadows {
+                            u64::from(self.tri.camera.sample_width())
+                                * u64::from(self.tri.camera.sample_height())
+                        } else {
+                            0
+                        },
                         ..AccelOptions::default()
                     },
                 );
