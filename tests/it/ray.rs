@@ -1619,3 +1619,82 @@ fn the_light_buffer_renders_every_scene_bit_for_bit() {
         );
     }
 }
+
+/// A library caller's scene with a NaN or infinite corner does not make
+/// the light buffer's build panic (point and parallel lights), and its
+/// answers stay the walk's.
+#[test]
+fn the_light_buffer_survives_non_finite_corners() {
+    use rendiff::color::Rgb;
+    use rendiff::shade::{Light, LightKind, ShadowQuery};
+    for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+        let tris = vec![
+            [
+                Vec3::new(-2.0, 0.0, -2.0),
+                Vec3::new(-2.0, 0.0, 2.0),
+                Vec3::new(2.0, 0.0, 2.0),
+            ],
+            [
+                Vec3::new(-0.5, 1.0, -0.5),
+                Vec3::new(-0.5, 1.0, 0.5),
+                Vec3::new(0.5, 1.0, 0.5),
+            ],
+            [
+                Vec3::new(0.0, 0.5, 0.0),
+                Vec3::new(bad, 0.5, 1.0),
+                Vec3::new(1.0, bad, 0.0),
+            ],
+        ];
+        let mut scene = TriScene::from_triangles(camera(), &tris);
+        scene.lights.push(Light {
+            kind: LightKind::Point {
+                position: Vec3::new(0.1, 3.0, 0.2),
+            },
+            color: Rgb::WHITE,
+            shadowless: false,
+            fade: None,
+        });
+        let parallel = Vec3::new(-0.2, -1.0, 0.1).normalize();
+        scene.lights.push(Light {
+            kind: LightKind::Parallel {
+                direction: parallel,
+            },
+            color: Rgb::WHITE,
+            shadowless: false,
+            fade: None,
+        });
+        let buffered = Accel::new(
+            &scene,
+            AccelOptions {
+                shadow_rays_per_light: u64::MAX,
+                ..AccelOptions::default()
+            },
+        );
+        let walked = Accel::new(&scene, AccelOptions::default());
+        let (fast, slow) = (ShadowRays::new(&buffered), ShadowRays::new(&walked));
+        let queries: Vec<ShadowQuery> = (0..128)
+            .map(|k| {
+                let origin = Vec3::new(-1.5 + 0.05 * (k % 64) as f32, 1e-4, 0.3);
+                let v = Vec3::new(0.1, 3.0, 0.2) - origin;
+                let (light, dir, t_max) = if k < 64 {
+                    (0, v / v.length(), v.length())
+                } else {
+                    (1, -parallel, f32::INFINITY)
+                };
+                ShadowQuery {
+                    light,
+                    origin,
+                    dir,
+                    t_max,
+                    normal: Vec3::Y,
+                    leaves: 0,
+                }
+            })
+            .collect();
+        let mut got = vec![Rgb::WHITE; queries.len()];
+        let mut want = vec![Rgb::WHITE; queries.len()];
+        fast.transmittance_packets(&queries, &mut got);
+        slow.transmittance_packets(&queries, &mut want);
+        assert_eq!(got, want, "corner {bad}");
+    }
+}

@@ -435,7 +435,10 @@ impl LightBuffer {
             let g = &grids[usize::from(e.grid)];
             let (x0, x1) = (g.index(0, e.lo[0]), g.index(0, e.hi[0]));
             let (y0, y1) = (g.index(1, e.lo[1]), g.index(1, e.hi[1]));
-            (g.base + x0, x1 - x0 + 1, y0..=y1, g.res[0])
+            // (Ordered even where a NaN corner, which a library caller's
+            // scene could hold, sends one end to cell 0.)
+            let (x0, x1) = (x0.min(x1), x0.max(x1));
+            (g.base + x0, x1 - x0 + 1, y0.min(y1)..=y0.max(y1), g.res[0])
         };
         let cap = u32::try_from(MAX_LIST - near.len()).unwrap_or(0);
         for e in &entries {
