@@ -1526,14 +1526,7 @@ fn the_light_buffer_answers_as_the_walk() {
                 }
             }
         }
-        let buffered = Accel::new(
-            &scene,
-            AccelOptions {
-                shadow_rays_per_light: u64::MAX,
-                ..AccelOptions::default()
-            },
-        );
-        let walked = Accel::new(&scene, AccelOptions::default());
+        let (buffered, walked) = buffered_and_walked(&scene);
         let (fast, slow) = (ShadowRays::new(&buffered), ShadowRays::new(&walked));
         let (mut blocked, mut lit, mut between) = (0usize, 0usize, 0usize);
         for run in queries.chunks(13) {
@@ -1594,6 +1587,19 @@ fn the_plan_shows_the_light_buffer_rule() {
         "{}",
         line("dense")
     );
+}
+
+/// The structures of `scene` with a light buffer for every light (as
+/// many rays as asked for) and without any.
+fn buffered_and_walked(scene: &TriScene) -> (Accel<'_>, Accel<'_>) {
+    let buffered = Accel::new(
+        scene,
+        AccelOptions {
+            shadow_rays_per_light: u64::MAX,
+            ..AccelOptions::default()
+        },
+    );
+    (buffered, Accel::new(scene, AccelOptions::default()))
 }
 
 /// Every bundled and hazard scene, ray traced with light buffers and
@@ -1663,14 +1669,7 @@ fn the_light_buffer_survives_non_finite_corners() {
             shadowless: false,
             fade: None,
         });
-        let buffered = Accel::new(
-            &scene,
-            AccelOptions {
-                shadow_rays_per_light: u64::MAX,
-                ..AccelOptions::default()
-            },
-        );
-        let walked = Accel::new(&scene, AccelOptions::default());
+        let (buffered, walked) = buffered_and_walked(&scene);
         let (fast, slow) = (ShadowRays::new(&buffered), ShadowRays::new(&walked));
         let queries: Vec<ShadowQuery> = (0..128)
             .map(|k| {

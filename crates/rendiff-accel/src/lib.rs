@@ -167,15 +167,12 @@ impl<'s> Accel<'s> {
             .iter()
             .chain(&analytic_class)
             .any(|c| *c != ShadowClass::None);
-        let opaque_triangles_only = !class.contains(&ShadowClass::Transparent)
-            && analytic
-                .iter()
-                .all(|&k| analytic_class[k] == ShadowClass::None);
-        // Every caster a triangle (no analytic shape casts): a cell's
-        // list then holds every caster a ray of it can meet.
+        // Every caster a triangle (no analytic shape casts): a light
+        // buffer's cell then lists every caster a ray of it can meet.
         let triangles_only = analytic
             .iter()
             .all(|&k| analytic_class[k] == ShadowClass::None);
+        let opaque_triangles_only = triangles_only && !class.contains(&ShadowClass::Transparent);
         let light_buffers = if triangles_only && opts.shadow_rays_per_light > 0 {
             let casters = ids
                 .iter()
@@ -183,18 +180,14 @@ impl<'s> Accel<'s> {
                 .count() as u64;
             let pays =
                 rendiff_core::options::light_buffer_pays(opts.shadow_rays_per_light, casters);
-            let mut in_bvh = vec![false; scene.len()];
-            for &id in &ids {
-                in_bvh[id as usize] = true;
-            }
             LightBuffers::new(
                 scene,
+                &ids,
                 |l| pays && !scene.lights[l].shadowless,
                 |l, id| {
                     // What `accept` takes: casting, and not in a plane
                     // through the point light.
-                    in_bvh[id as usize]
-                        && class[id as usize] != ShadowClass::None
+                    class[id as usize] != ShadowClass::None
                         && match scene.lights[l].kind {
                             rendiff_core::shade::LightKind::Point { position } => {
                                 !plane_through(scene, id, to_f64(position))
@@ -769,37 +762,25 @@ fn by_buffer(
             *cache = Occluder::after(*cache, q.light, stopper, a.scene);
         }
     }
-    if n == 0 {
-        // As in the walk's path, a packet whose last ray is lit clears the
-        // cache (at a shadow's edge, the next packet would mostly miss it).
-        if !blocked[queries.len() - 1] {
-            *cache = None;
+    if n > 0 {
+        let mut stopper = [bvh::NO_SKIP; bvh::PACKET];
+        walk_some(
+            &a.bvh,
+            (rays, skips),
+            &of[..n],
+            accept,
+            blocked,
+            &mut stopper,
+        );
+        // The cache follows the last walked ray's stopper, where it is
+        // stopped.
+        let last = of[n - 1];
+        if blocked[last] {
+            *cache = Occluder::after(*cache, queries[last].light, stopper[last], a.scene);
         }
-        return;
     }
-    let walk_rays: [Ray64; bvh::PACKET] = std::array::from_fn(|j| rays[of[j.min(n - 1)]]);
-    let walk_skips: [u32; bvh::PACKET] = std::array::from_fn(|j| skips[of[j.min(n - 1)]]);
-    let mut walked = [false; bvh::PACKET];
-    let mut stopper = [bvh::NO_SKIP; bvh::PACKET];
-    a.bvh.any_packet(
-        &walk_rays[..n],
-        &walk_skips[..n],
-        |j, id, _| {
-            let stops = accept(of[j], id);
-            if stops {
-                stopper[j] = id;
-            }
-            stops
-        },
-        &mut walked[..n],
-    );
-    for (&k, &w) in of[..n].iter().zip(&walked[..n]) {
-        blocked[k] = w;
-    }
-    // The cache follows the last walked ray's stopper, where it is stopped.
-    if walked[n - 1] {
-        *cache = Occluder::after(*cache, queries[of[n - 1]].light, stopper[n - 1], a.scene);
-    }
+    // As in the walk's path, a packet whose last ray is lit clears the
+    // cache (at a shadow's edge, the next packet would mostly miss it).
     if !blocked[queries.len() - 1] {
         *cache = None;
     }
@@ -819,19 +800,38 @@ type PacketRays<'p> = (
 #[inline(never)]
 fn walk_rest(
     bvh: &Bvh,
-    (rays, skips): (&[Ray64], &[u32]),
+    rays: (&[Ray64], &[u32]),
     accept: &impl Fn(usize, u32) -> bool,
     blocked: &mut [bool; bvh::PACKET],
     stopper: &mut [u32; bvh::PACKET],
 ) {
     let mut of = [0usize; bvh::PACKET];
     let mut n = 0;
-    for k in (0..rays.len()).filter(|&k| !blocked[k]) {
+    for k in (0..rays.0.len()).filter(|&k| !blocked[k]) {
         of[n] = k;
         n += 1;
     }
-    let rest_rays: [Ray64; bvh::PACKET] = std::array::from_fn(|j| rays[of[j].min(rays.len() - 1)]);
-    let rest_skips: [u32; bvh::PACKET] = std::array::from_fn(|j| skips[of[j].min(rays.len() - 1)]);
+    walk_some(bvh, rays, &of[..n], accept, blocked, stopper);
+}
+
+/// The any-hit walk of the rays `of` of a packet (indices into `rays`)
+/// as a smaller packet: sets their `blocked` (and `stopper` where
+/// stopped).
+#[inline(always)]
+fn walk_some(
+    bvh: &Bvh,
+    (rays, skips): (&[Ray64], &[u32]),
+    of: &[usize],
+    accept: &impl Fn(usize, u32) -> bool,
+    blocked: &mut [bool; bvh::PACKET],
+    stopper: &mut [u32; bvh::PACKET],
+) {
+    let n = of.len();
+    if n == 0 {
+        return;
+    }
+    let rest_rays: [Ray64; bvh::PACKET] = std::array::from_fn(|j| rays[of[j.min(n - 1)]]);
+    let rest_skips: [u32; bvh::PACKET] = std::array::from_fn(|j| skips[of[j.min(n - 1)]]);
     let mut walked = [false; bvh::PACKET];
     bvh.any_packet(
         &rest_rays[..n],
@@ -845,7 +845,7 @@ fn walk_rest(
         },
         &mut walked[..n],
     );
-    for (&k, &w) in of[..n].iter().zip(&walked[..n]) {
+    for (&k, &w) in of.iter().zip(&walked[..n]) {
         blocked[k] = w;
     }
 }
