@@ -404,6 +404,68 @@ pub(super) fn tokenize<'a>(line: &'a str, out: &mut Vec<&'a str>) {
     }
 }
 
+/// The file index (from 0) of a face's index `i` (1 … `count` from the
+/// start, −1 … −`count` back from the last defined), or `None` when it is
+/// out of range.
+fn resolve_index(i: i64, count: usize) -> Option<usize> {
+    let back = usize::try_from(i.unsigned_abs()).unwrap_or(usize::MAX);
+    match i.signum() {
+        1 if back <= count => Some(back - 1),
+        -1 if back <= count => Some(count - back),
+        _ => None,
+    }
+}
+
+/// A corner `v`, `v/vt`, `v//vn` or `v/vt/vn` of plain integer indices
+/// ([`plain_integer`]'s: a sign and one to eighteen digits) within range,
+/// resolved as [`Reader::parse_corners`] resolves it, in one pass over its
+/// bytes (`corner_parts` and then `plain_integer` on each part were 160
+/// instructions a corner); `None` for any other corner, which
+/// `parse_corners` then reads or names.
+fn quick_corner(corner: &str, counts: [usize; 3]) -> Option<Corner> {
+    let b = corner.as_bytes();
+    let mut out = [None; 3];
+    let mut i = 0;
+    for (k, slot) in out.iter_mut().enumerate() {
+        let start = i;
+        let neg = b.get(i) == Some(&b'-');
+        if neg || b.get(i) == Some(&b'+') {
+            i += 1;
+        }
+        let digits = i;
+        let mut v = 0i64;
+        while let Some(&c) = b.get(i).filter(|c| c.is_ascii_digit()) {
+            if i - digits == 18 {
+                return None;
+            }
+            v = v * 10 + i64::from(c - b'0');
+            i += 1;
+        }
+        if i == digits {
+            // No digits: an empty part is none (an empty position then
+            // makes the corner not plain, below); a lone sign is not plain.
+            if i != start {
+                return None;
+            }
+        } else {
+            *slot = Some(resolve_index(if neg { -v } else { v }, counts[k])?);
+        }
+        match b.get(i) {
+            None => {
+                return Some(Corner {
+                    v: out[0]?,
+                    t: out[1],
+                    n: out[2],
+                });
+            }
+            Some(b'/') => i += 1,
+            Some(_) => return None,
+        }
+    }
+    // A fourth part.
+    None
+}
+
 /// A polygon error of a face with more than three corners, in the face's
 /// own terms: its corners as written on the line.
 /// The rings of a face as corner indices: the face itself, or, for a
@@ -757,19 +819,16 @@ impl Reader<'_> {
                             ),
                         )
                     })?;
-                let back = usize::try_from(i.unsigned_abs()).unwrap_or(usize::MAX);
-                match i.signum() {
-                    1 if back <= count => Ok(back - 1),
-                    -1 if back <= count => Ok(count - back),
-                    _ => Err(self.err(
+                resolve_index(i, count).ok_or_else(|| {
+                    self.err(
                         line,
                         format!(
                             "{} index {i} in corner `{}` is out of range (1 … {count}, or -1 … -{count}, defined so far)",
                             ["vertex", "texture", "normal"][kind],
                             shown(corner)
                         ),
-                    )),
-                }
+                    )
+                })
             };
             let v = idx(v.unwrap_or(""), 0)?;
             let t = t.filter(|s| !s.is_empty()).map(|s| idx(s, 1)).transpose()?;
@@ -788,7 +847,15 @@ impl Reader<'_> {
             ));
         }
         self.parse_corners(line, args)?;
-        let to_be = (args.len() - 2) as u64;
+        self.add_face(line, args)
+    }
+
+    /// Adds the face whose corners [`Reader::parse_corners`] (or
+    /// [`Reader::quick_line`]) left in `self.corners`; `args` are the
+    /// corners as written, which only a face of more than three corners
+    /// names (in a triangulation's error).
+    fn add_face(&mut self, line: usize, args: &[&str]) -> Result<(), LoadError> {
+        let to_be = (self.corners.len() - 2) as u64;
         self.triangles_to_be += to_be;
         self.count(line, to_be * BYTES_PER_TRIANGLE_TO_BE)?;
 
@@ -918,6 +985,85 @@ impl Reader<'_> {
         self.current_mtl = u32::try_from(k).unwrap_or(NO_USEMTL - 1);
     }
 
+    /// The two lines a mesh file is made of, read without tokenizing:
+    /// `v` and three plain decimals ([`plain_decimal`]), or `f` and three
+    /// corners of plain integer indices within range ([`quick_corner`]),
+    /// the words apart by spaces or tabs, nothing after the last but
+    /// spaces or tabs. Returns the text after the line; `None`, having
+    /// changed nothing, for any other line (white space before the
+    /// keyword, a comment, an exponent, a fourth number or corner, an
+    /// index out of range …), which [`Reader::statement`] then reads and,
+    /// where it is wrong, names. A line read here leaves the reader as
+    /// `statement` leaves it: the same numbers (`parse_f32` returns
+    /// `plain_decimal`'s where it has one), the same indices, the same
+    /// counting. Tokenizing the line and matching its keyword had been
+    /// about 1 450 instructions a line of `scenes/dense.toml`'s meshes.
+    fn quick_line<'t>(&mut self, line: usize, text: &'t str) -> Result<Option<&'t str>, LoadError> {
+        let b = text.as_bytes();
+        let vertex = match b {
+            [b'v', b' ' | b'\t', ..] => true,
+            [b'f', b' ' | b'\t', ..] => false,
+            _ => return Ok(None),
+        };
+        let mut words = [(0, 0); 3];
+        let mut i = 1;
+        for w in &mut words {
+            while i < b.len() && matches!(b[i], b' ' | b'\t') {
+                i += 1;
+            }
+            let start = i;
+            while i < b.len() && BYTE_CLASS[usize::from(b[i])] == WORD {
+                i += 1;
+            }
+            if i == start {
+                return Ok(None);
+            }
+            *w = (start, i);
+        }
+        while i < b.len() && matches!(b[i], b' ' | b'\t') {
+            i += 1;
+        }
+        if i < b.len() && !matches!(b[i], b'\n' | b'\r') {
+            return Ok(None);
+        }
+        // Words end before a space, a tab, a line end, `#` or a non-ASCII
+        // byte: on character boundaries.
+        let word = |k: usize| &text[words[k].0..words[k].1];
+        if vertex {
+            let (Some(x), Some(y), Some(z)) = (
+                plain_decimal(word(0)),
+                plain_decimal(word(1)),
+                plain_decimal(word(2)),
+            ) else {
+                return Ok(None);
+            };
+            self.positions.push(Vec3::new(x, y, z));
+            self.count(line, BYTES_PER_READ_VERTEX)?;
+        } else {
+            let counts = [
+                self.positions.file.len(),
+                self.uvs.file.len(),
+                self.normals.file.len(),
+            ];
+            let (Some(c0), Some(c1), Some(c2)) = (
+                quick_corner(word(0), counts),
+                quick_corner(word(1), counts),
+                quick_corner(word(2), counts),
+            ) else {
+                return Ok(None);
+            };
+            self.corners.clear();
+            self.corners.extend([c0, c1, c2]);
+            // A triangle's corners as written are never named.
+            self.add_face(line, &[])?;
+        }
+        self.lines_since += 1;
+        if self.lines_since >= LINES_PER_RESERVATION {
+            self.reserve(line)?;
+        }
+        Ok(Some(split_line(text, i).1))
+    }
+
     /// One statement: `toks` are its words, `raw` the whole line.
     fn statement(&mut self, line: usize, toks: &[&str], raw: &str) -> Result<(), LoadError> {
         let Some((&kw, args)) = toks.split_first() else {
@@ -1033,9 +1179,13 @@ fn read(
     let result = (|| {
         let mut rest: &str = text;
         while !rest.is_empty() {
+            last += 1;
+            if let Some(after) = r.quick_line(last, rest)? {
+                rest = after;
+                continue;
+            }
             let (raw, after) = first_line(rest, &mut toks);
             rest = after;
-            last += 1;
             r.statement(last, &toks, raw)?;
         }
         r.end_model();
@@ -1145,6 +1295,148 @@ mod tests {
         assert_eq!(m.triangles[1].n, None);
         assert!(!m.has_uv());
         assert_eq!(m.first_face_without_uv(), Some(9));
+    }
+
+    /// The quick path (`Reader::quick_line`) reads what the tokenizing
+    /// path reads: random files of plain and unusual lines give the same
+    /// mesh, or the same error at the same line, as the same files with a
+    /// space before every line (which no quick line has, so the statement
+    /// path reads them all). Half the files hold only lines a mesh may
+    /// have, so that most of those load.
+    #[test]
+    fn quick_lines_read_as_statements_do() {
+        let mut z = 0x2545_f491_4f6c_dd1du64;
+        let mut next = move |n: u64| {
+            z ^= z << 13;
+            z ^= z >> 7;
+            z ^= z << 17;
+            z % n
+        };
+        type Next<'a> = &'a mut dyn FnMut(u64) -> u64;
+        let number = |next: Next<'_>, odd: bool| -> String {
+            match if odd { next(10) } else { 3 + next(7) } {
+                0 => "1e-3".into(),
+                1 => "-".into(),
+                2 => "1234567890123456789012".into(),
+                3 => format!("{}", f32::from_bits(next(1 << 31) as u32 & 0x4FFF_FFFF)),
+                _ => format!(
+                    "{}{}.{}",
+                    ["", "-", "+"][next(3) as usize],
+                    next(100),
+                    next(100_000)
+                ),
+            }
+        };
+        // An index among `count` entries (uvs, normals: 3).
+        let index = |next: Next<'_>, odd: bool, count: u64| -> String {
+            match if odd {
+                next(12)
+            } else {
+                2 + 2 * next(2) + 6 * next(2)
+            } {
+                0 => "0".into(),
+                1 => "-0".into(),
+                2 => format!("-{}", 1 + next(count)),
+                3 => "99".into(),
+                4 => format!("+{}", 1 + next(count)),
+                5 => "1234567890123456789".into(),
+                6 => String::new(),
+                7 => "x".into(),
+                _ => format!("{}", 1 + next(count)),
+            }
+        };
+        let corner = |next: Next<'_>, odd: bool| -> String {
+            let odd_v = odd && next(4) == 0;
+            let v = index(next, odd_v, 9);
+            match if odd {
+                next(9)
+            } else {
+                [0, 1, 2, 5, 6, 6][next(6) as usize]
+            } {
+                0 => format!("{v}/{}", index(next, odd, 3)),
+                1 => format!("{v}//{}", index(next, odd, 3)),
+                2 => format!("{v}/{}/{}", index(next, odd, 3), index(next, odd, 3)),
+                3 => format!("{v}/1/1/1"),
+                4 => format!("{v}//"),
+                5 => format!("{v}/"),
+                _ => v,
+            }
+        };
+        let (mut quick, mut loaded) = (0, 0);
+        for _ in 0..3000 {
+            let odd = next(2) == 0;
+            let mut lines: Vec<String> = (0..9)
+                .map(|k| format!("v {k}.5 {}.25 -{k}", k % 3))
+                .chain((0..3).map(|k| format!("vn 0 {k} 1")))
+                .chain((0..3).map(|k| format!("vt 0.{k} 1")))
+                .collect();
+            for _ in 0..1 + next(12) {
+                let sep = [" ", " ", " ", "\t", "  ", " \t"][next(6) as usize];
+                let tail = if odd {
+                    ["", "", " ", "\t", " # note", "#", "\u{b}", " 7", "é"][next(9) as usize]
+                } else {
+                    ["", "", "", " ", "\t", " # note", "#"][next(7) as usize]
+                };
+                let line = match next(if odd { 8 } else { 7 }) {
+                    0..=2 => {
+                        let n = if odd && next(8) == 0 { 2 + next(3) } else { 3 };
+                        let nums: Vec<String> = (0..n).map(|_| number(&mut next, odd)).collect();
+                        format!("v{sep}{}{tail}", nums.join(sep))
+                    }
+                    3..=5 => {
+                        let n = if next(8) == 0 { 4 } else { 3 };
+                        let cs: Vec<String> = (0..n).map(|_| corner(&mut next, odd)).collect();
+                        format!("f{sep}{}{tail}", cs.join(sep))
+                    }
+                    6 => ["g part", "o x", "usemtl red", "s off", "vn 1 0 0", ""][next(6) as usize]
+                        .into(),
+                    _ => format!("{}v 1 2 3", ["\t", "v", "F"][next(3) as usize]),
+                };
+                quick += usize::from(line.starts_with("v ") || line.starts_with("f "));
+                lines.push(line);
+            }
+            let end = ["\n", "\r\n", "\r"][next(3) as usize];
+            let text = lines.join(end);
+            let spaced = lines
+                .iter()
+                .map(|l| format!(" {l}"))
+                .collect::<Vec<_>>()
+                .join(end);
+            match (load(&text), load(&spaced)) {
+                (Ok(a), Ok(b)) => {
+                    loaded += 1;
+                    assert_eq!(a, b, "{text:?}");
+                }
+                (Err(a), Err(b)) => assert_eq!(a.to_string(), b.to_string(), "{text:?}"),
+                (a, b) => panic!("{text:?}: {:?} against {:?}", a.map(|_| ()), b.map(|_| ())),
+            }
+        }
+        assert!(quick > 10_000, "{quick} lines could take the quick path");
+        assert!(loaded > 1_000, "{loaded} of 3000 files loaded");
+    }
+
+    /// Every bundled mesh (`v`, `vt`, `vn`, `f` with all corner forms,
+    /// `o`, `g`, `usemtl`, comments) reads as it does with every line sent
+    /// to the statement path.
+    #[test]
+    fn bundled_meshes_read_as_statements_do() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/meshes");
+        let mut files = vec![dir.join("spider/spider.obj")];
+        for e in std::fs::read_dir(&dir).unwrap() {
+            let p = e.unwrap().path();
+            if p.extension().is_some_and(|x| x == "obj") {
+                files.push(p);
+            }
+        }
+        assert!(files.len() >= 10, "{files:?}");
+        for p in files {
+            let bytes = std::fs::read(&p).unwrap();
+            let text = String::from_utf8_lossy(&bytes);
+            let spaced: String = lines(&text).map(|l| format!(" {l}\n")).collect();
+            let a = load_obj_bytes(Path::new("m.obj"), &bytes).unwrap();
+            let b = load_obj_bytes(Path::new("m.obj"), spaced.as_bytes()).unwrap();
+            assert!(a == b, "{} reads differently", p.display());
+        }
     }
 
     #[test]
