@@ -237,7 +237,13 @@ impl EmbreeScene {
             geom_id: [INVALID_ID; 8],
             inst_id: [[INVALID_ID; 8]],
         };
-        let mut valid = [0i32; 8];
+        // Embree reads the mask with aligned vector loads: it must be
+        // 32-byte aligned like the rays (a plain `[i32; 8]` happened to be
+        // until fat LTO moved it, and `rtcIntersect8` then crashed).
+        #[repr(C, align(32))]
+        struct Valid([i32; 8]);
+        let mut valid = Valid([0; 8]);
+        let valid = &mut valid.0;
         for (k, &(o, d, t0, t1)) in rays.iter().take(8).enumerate() {
             valid[k] = -1;
             (rh.org_x[k], rh.org_y[k], rh.org_z[k]) = (o[0], o[1], o[2]);
