@@ -1416,27 +1416,50 @@ mod tests {
     }
 
     /// Every bundled mesh (`v`, `vt`, `vn`, `f` with all corner forms,
-    /// `o`, `g`, `usemtl`, comments) reads as it does with every line sent
-    /// to the statement path.
+    /// `o`, `g`, `usemtl`, comments) and every input of the OBJ fuzz
+    /// corpus (`fuzz/corpus/obj_bytes`: binary garbage, odd white space,
+    /// huge indices) reads as it does with every line sent to the
+    /// statement path: the same mesh, or the same error.
     #[test]
-    fn bundled_meshes_read_as_statements_do() {
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/meshes");
-        let mut files = vec![dir.join("spider/spider.obj")];
-        for e in std::fs::read_dir(&dir).unwrap() {
-            let p = e.unwrap().path();
-            if p.extension().is_some_and(|x| x == "obj") {
-                files.push(p);
+    fn bundled_meshes_and_the_fuzz_corpus_read_as_statements_do() {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+        let meshes = root.join("scenes/meshes");
+        let mut files = vec![meshes.join("spider/spider.obj")];
+        for dir in [meshes, root.join("fuzz/corpus/obj_bytes")] {
+            for e in std::fs::read_dir(&dir).unwrap() {
+                let p = e.unwrap().path();
+                if p.is_file() && p.extension().is_none_or(|x| x == "obj") {
+                    files.push(p);
+                }
             }
         }
-        assert!(files.len() >= 10, "{files:?}");
+        assert!(files.len() >= 500, "{} files", files.len());
+        let (mut loaded, mut quick) = (0, 0);
         for p in files {
             let bytes = std::fs::read(&p).unwrap();
             let text = String::from_utf8_lossy(&bytes);
-            let spaced: String = lines(&text).map(|l| format!(" {l}\n")).collect();
-            let a = load_obj_bytes(Path::new("m.obj"), &bytes).unwrap();
-            let b = load_obj_bytes(Path::new("m.obj"), spaced.as_bytes()).unwrap();
-            assert!(a == b, "{} reads differently", p.display());
+            let text = text.strip_prefix('\u{FEFF}').unwrap_or(&text);
+            quick += lines(text)
+                .filter(|l| l.starts_with("v ") || l.starts_with("f "))
+                .count();
+            let spaced: String = lines(text).map(|l| format!(" {l}\n")).collect();
+            let path = Path::new("m.obj");
+            match (
+                load_obj_bytes(path, &bytes),
+                load_obj_bytes(path, spaced.as_bytes()),
+            ) {
+                (Ok(a), Ok(b)) => {
+                    loaded += 1;
+                    assert!(a == b, "{} reads differently", p.display());
+                }
+                (Err(a), Err(b)) => assert_eq!(a.to_string(), b.to_string(), "{}", p.display()),
+                (a, b) => panic!("{}: {:?} against {:?}", p.display(), a.err(), b.err()),
+            }
         }
+        assert!(
+            loaded >= 100 && quick >= 100_000,
+            "{loaded} loaded, {quick} quick lines"
+        );
     }
 
     #[test]
