@@ -6,9 +6,15 @@
 //! rendiff-peers povray [SCENE.toml ...] [--threads 1,2] [--repeats N]
 //! rendiff-peers llvmpipe [--repeats N]
 //! rendiff-peers objload [--repeats N]
+//! rendiff-peers scaling [--threads 1,2,4,8,16] [--repeats N]
 //! rendiff-peers trees [SCENE.toml] [--subdivide K] [--repeats N]
 //! rendiff-peers profile SCENE.toml [--backend raster|ray] [--subdivide K] [--shadowless] [--reuse] [--build] [--repeats N]
 //! ```
+//!
+//! `scaling`: the builds, rays and frames of the 940 k bunny, the builds
+//! at ten million triangles, the bundled scenes and the whole process at
+//! each thread count, beside Embree's, with the parallel efficiency and a
+//! check that every result is bit-identical at every count (`scaling.rs`).
 //!
 //! `trees`: the BVH built by the SAH and in Morton order over the same
 //! triangles (default: the 940 k bunny), each build timed, then the same
@@ -56,6 +62,7 @@
 
 mod embree;
 mod llvmpipe;
+mod scaling;
 mod summary;
 
 use std::path::{Path, PathBuf};
@@ -115,7 +122,7 @@ fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let Some(cmd) = args.first() else {
         bail!(
-            "usage: rendiff-peers summary [--repeats N] | trees [SCENE] [--subdivide K] [--repeats N] | embree [SCENE] [--subdivide K] [--morton] [--repeats N] | povray [SCENE...] [--threads 1,2] [--repeats N] | llvmpipe [--repeats N] | objload [--repeats N] | rays [SCENE] [--subdivide K] [--repeats N] | profile SCENE [--backend raster|ray] [--subdivide K] [--shadowless] [--reuse] [--build] [--repeats N]"
+            "usage: rendiff-peers summary [--repeats N] | trees [SCENE] [--subdivide K] [--repeats N] | embree [SCENE] [--subdivide K] [--morton] [--repeats N] | povray [SCENE...] [--threads 1,2] [--repeats N] | llvmpipe [--repeats N] | objload [--repeats N] | scaling [--threads 1,2,4,8,16] [--repeats N] | rays [SCENE] [--subdivide K] [--repeats N] | profile SCENE [--backend raster|ray] [--subdivide K] [--shadowless] [--reuse] [--build] [--repeats N]"
         );
     };
     let rest = &args[1..];
@@ -137,6 +144,14 @@ fn main() -> Result<()> {
             povray_cmp(&scenes, &threads, repeats).map(|_| ())
         }
         "summary" => summary::summary(repeats),
+        "scaling" => {
+            let threads: Vec<usize> = flag(rest, "--threads").map_or_else(
+                || Ok(vec![1, 2, 4, 8, 16]),
+                |s| s.split(',').map(str::parse).collect(),
+            )?;
+            anyhow::ensure!(!threads.is_empty(), "--threads needs at least one count");
+            scaling::scaling(&threads, repeats)
+        }
         "trees" => {
             let (scene, k) = bench_scene(rest)?;
             trees(&scene, k, repeats).map(|_| ())
@@ -168,7 +183,7 @@ fn main() -> Result<()> {
             }
         }
         other => bail!(
-            "unknown command {other:?}: expected summary, embree, trees, povray, llvmpipe, objload, rays or profile"
+            "unknown command {other:?}: expected summary, scaling, embree, trees, povray, llvmpipe, objload, rays or profile"
         ),
     }
 }
