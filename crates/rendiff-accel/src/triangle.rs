@@ -270,8 +270,8 @@ pub(crate) struct TriPack {
 }
 
 impl TriPack {
-    /// An empty pack (no lanes; the tests fill one lane by lane).
-    #[cfg(test)]
+    /// An empty pack (no lanes; the build's arrays start filled with
+    /// it, and the tests fill one lane by lane).
     pub(crate) const EMPTY: TriPack = TriPack {
         v: [[Vec4::ZERO; 3]; 3],
         lanes: 0,
