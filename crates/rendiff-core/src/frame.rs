@@ -253,18 +253,23 @@ impl Frame {
         let sw = self.sample_width() as usize;
         #[expect(clippy::cast_precision_loss, reason = "n² ≤ 256")]
         let inv = 1.0 / (n * n) as f32;
-        for y in 0..self.height as usize {
-            for x in 0..self.width as usize {
-                let mut acc = Rgb::BLACK;
-                for b in 0..n {
-                    let row = (y * n + b) * sw + x * n;
-                    for a in 0..n {
-                        acc += self.sample_color[row + a].clamp01();
+        let samples = &self.sample_color;
+        // Row by row in parallel (each pixel the same sum in the same order).
+        self.color
+            .par_chunks_mut((self.width as usize).max(1))
+            .enumerate()
+            .for_each(|(y, row)| {
+                for (x, pixel) in row.iter_mut().enumerate() {
+                    let mut acc = Rgb::BLACK;
+                    for b in 0..n {
+                        let at = (y * n + b) * sw + x * n;
+                        for a in 0..n {
+                            acc += samples[at + a].clamp01();
+                        }
                     }
+                    *pixel = if n == 1 { acc } else { acc * inv };
                 }
-                self.color[y * self.width as usize + x] = if n == 1 { acc } else { acc * inv };
-            }
-        }
+            });
     }
 
     /// Writes the colour image (8-bit sRGB or 16-bit linear).
@@ -313,11 +318,34 @@ pub const GBUFFER_FILES: [&str; 4] = ["depth.pfm", "id.png", "flags.png", "color
 /// `v` made `len` copies of `value`: in its own memory where that is large
 /// enough, else in a new vector (`vec!`, which takes zeros straight from
 /// the allocator's zeroed pages instead of writing them).
-fn refill<T: Clone>(v: &mut Vec<T>, len: usize, value: T) {
+/// Large buffers are written in parallel.
+pub fn refill<T: Clone + Send + Sync>(v: &mut Vec<T>, len: usize, value: T) {
     if v.capacity() < len {
         *v = vec![value; len];
     } else {
-        v.clear();
+        v.truncate(len);
+        v.par_iter_mut()
+            .with_min_len(1 << 16)
+            .for_each(|x| *x = value.clone());
         v.resize(len, value);
     }
+}
+
+/// Bands a frame's parallel passes want per thread of the pool: a band is
+/// one task, and with few of them the threads that draw the costly rows
+/// (the middle of a centred mesh) finish last while the others wait.
+const BANDS_PER_THREAD: u32 = 16;
+
+/// The sample rows of a pass's bands over `height` rows: `preferred`,
+/// or fewer where that would leave fewer than [`BANDS_PER_THREAD`] bands
+/// for each thread of the current rayon pool, down to `least`; a multiple
+/// of `step`. The bands only divide the work: every sample is computed
+/// alike whatever their height, so the frame is the same at every thread
+/// count.
+#[must_use]
+pub fn band_rows(height: u32, preferred: u32, least: u32, step: u32) -> u32 {
+    let threads = u32::try_from(rayon::current_num_threads()).unwrap_or(u32::MAX);
+    let fit = height / threads.saturating_mul(BANDS_PER_THREAD).max(1);
+    let step = step.max(1);
+    (fit.clamp(least.max(1), preferred.max(1)) / step * step).max(step)
 }

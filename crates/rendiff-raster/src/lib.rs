@@ -37,7 +37,7 @@ use clip::{HVert, clip_polygon, planes};
 use rendiff_accel::{Accel, AccelOptions, BvhBuild, ShadowBatch, ShadowRays};
 use rendiff_core::camera::{Projection, SampleRays};
 use rendiff_core::coverage::{FillRule, SampleGrid, SnappedTri, Sub8, bbox_samples, doubled_area};
-use rendiff_core::frame::{BACKGROUND, Frame, Sample};
+use rendiff_core::frame::{BACKGROUND, Frame, Sample, band_rows, refill};
 use rendiff_core::math::{DVec3, to_f64};
 use rendiff_core::options::{DepthFormat, ShadowMode};
 use rendiff_core::shade::{self, Unoccluded, Visibility};
@@ -45,7 +45,8 @@ use rendiff_core::tri_scene::{TriConsts, TriScene};
 
 pub use rendiff_core::coverage::DEPTH_DRIFT_REL;
 
-/// Sample rows per band.
+/// Sample rows per band of the visibility pass (fewer on many threads:
+/// [`band_rows`]).
 const BAND: u32 = 32;
 /// Guard band around the screen (pixels); beyond it triangles are clipped.
 /// With sides ≤ 16384 px every snapped coordinate stays below 2¹⁷ px,
@@ -481,43 +482,56 @@ fn visibility_into(
             )
         })
         .collect();
-    let mut records: Vec<&Record> = chunks.iter().flat_map(|c| &c.0).collect();
-    if let Rule::Painter(rank) = rule {
-        // Drawing order; a triangle's sub-triangles stay together (stable).
-        records.sort_by_key(|r| rank.get(r.tri as usize).copied().unwrap_or(u32::MAX));
-    }
     let culled = chunks.iter().fold(Culled::default(), |a, (_, c)| Culled {
         frustum: a.frustum + c.frustum,
         backface: a.backface + c.backface,
     });
+    let n_records: usize = chunks.iter().map(|c| c.0.len()).sum();
+    // The records in drawing order, in runs: the setup's chunks (id
+    // order), or for the painter's rule all of them sorted by rank (a
+    // triangle's sub-triangles stay together: stable) and cut into runs.
+    let runs: Vec<Vec<&Record>> = if let Rule::Painter(rank) = rule {
+        let mut records: Vec<&Record> = chunks.iter().flat_map(|c| &c.0).collect();
+        records.sort_by_key(|r| rank.get(r.tri as usize).copied().unwrap_or(u32::MAX));
+        records.chunks(chunk).map(<[&Record]>::to_vec).collect()
+    } else {
+        chunks.par_iter().map(|c| c.0.iter().collect()).collect()
+    };
 
-    // Bin records to bands.
-    let bands = sh.div_ceil(BAND) as usize;
-    let mut counts = vec![0usize; bands + 1];
-    for r in &records {
-        for b in (r.rows.0 / BAND)..=((r.rows.1 - 1) / BAND) {
-            counts[b as usize + 1] += 1;
-        }
-    }
-    for b in 0..bands {
-        counts[b + 1] += counts[b];
-    }
-    let mut lists: Vec<&Record> =
-        vec![records.first().copied().unwrap_or(&EMPTY_RECORD); counts[bands]];
-    let mut fill = counts.clone();
-    for r in &records {
-        for b in (r.rows.0 / BAND)..=((r.rows.1 - 1) / BAND) {
-            lists[fill[b as usize]] = r;
-            fill[b as usize] += 1;
-        }
-    }
+    // Bin each run's records to bands (a counting sort per run, the runs
+    // in parallel): a band then draws run after run its part of each, so
+    // in drawing order.
+    let band_h = band_rows(sh, BAND, 8, 1);
+    let bands = sh.div_ceil(band_h) as usize;
+    let binned: Vec<(Vec<&Record>, Vec<u32>)> = runs
+        .par_iter()
+        .map(|run| {
+            let mut counts = vec![0u32; bands + 1];
+            for r in run {
+                for b in (r.rows.0 / band_h)..=((r.rows.1 - 1) / band_h) {
+                    counts[b as usize + 1] += 1;
+                }
+            }
+            for b in 0..bands {
+                counts[b + 1] += counts[b];
+            }
+            let mut lists: Vec<&Record> =
+                vec![run.first().copied().unwrap_or(&EMPTY_RECORD); counts[bands] as usize];
+            let mut fill = counts.clone();
+            for r in run {
+                for b in (r.rows.0 / band_h)..=((r.rows.1 - 1) / band_h) {
+                    lists[fill[b as usize] as usize] = r;
+                    fill[b as usize] += 1;
+                }
+            }
+            (lists, counts)
+        })
+        .collect();
 
     let total = (sw as usize) * (sh as usize);
     let (key, id) = (&mut buffers.key, &mut buffers.id);
-    key.clear();
-    key.resize(total, u32::MAX);
-    id.clear();
-    id.resize(total, BACKGROUND);
+    refill(key, total, u32::MAX);
+    refill(id, total, BACKGROUND);
     let depth_map = DepthMap {
         format: opts.depth,
         perspective,
@@ -531,7 +545,7 @@ fn visibility_into(
         sw,
         perspective,
     };
-    let band_len = (BAND * sw) as usize;
+    let band_len = (band_h * sw) as usize;
     // The BSP's rank of the piece each sample shows (0: none yet).
     let mut ranks = match rule {
         Rule::Pieces(_) => vec![0u32; total],
@@ -548,8 +562,8 @@ fn visibility_into(
         .zip(rank_bands)
         .enumerate()
         .map(|(b, ((key, id), rank))| {
-            let row0 = u32::try_from(b).unwrap_or(0) * BAND;
-            let rows = row0..(row0 + BAND).min(sh);
+            let row0 = u32::try_from(b).unwrap_or(0) * band_h;
+            let rows = row0..(row0 + band_h).min(sh);
             let mut writes = 0u64;
             let mut frags = 0u64;
             // (A `Pieces` rule always has its rank bands.)
@@ -565,17 +579,19 @@ fn visibility_into(
                 depth_map: &depth_map,
                 choose,
             };
-            for r in &lists[counts[b]..counts[b + 1]] {
-                let (w, f) = scan_record(&walk, r, rows.clone(), &mut band);
-                writes += w;
-                frags += f;
+            for (lists, counts) in &binned {
+                for r in &lists[counts[b] as usize..counts[b + 1] as usize] {
+                    let (w, f) = scan_record(&walk, r, rows.clone(), &mut band);
+                    writes += w;
+                    frags += f;
+                }
             }
             (writes, frags)
         })
         .collect();
     RasterStats {
         triangles: n_tris,
-        records: records.len(),
+        records: n_records,
         depth_writes: counters.iter().map(|c| c.0).sum(),
         fragments: counters.iter().map(|c| c.1).sum(),
         culled,

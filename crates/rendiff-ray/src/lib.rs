@@ -272,11 +272,13 @@ fn render_with(
         rays: SampleRays::new(cam),
     };
     let sw = cam.sample_width();
-    // Bands of TILE sample rows, each traced in TILE×TILE tiles (coherent
-    // rays), written straight into the frame's rows.
+    // Bands of TILE sample rows (fewer on many threads: `band_rows`), each
+    // traced in tiles TILE samples wide (coherent rays), written straight
+    // into the frame's rows.
     frame.reset(cam.width(), cam.height(), cam.samples(), scene.background);
+    let rows = rendiff_core::frame::band_rows(cam.sample_height(), TILE, 4, BLOCK_H);
     let stats = frame
-        .par_bands(TILE, |band| {
+        .par_bands(rows, |band| {
             let mut w = Worker {
                 vis: ShadowRays::new(accel),
                 last: None,
