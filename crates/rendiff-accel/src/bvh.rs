@@ -587,6 +587,10 @@ fn spread3(x: u32) -> u32 {
 /// order is the same on every run): three passes of a least significant
 /// digit radix sort, ten bits each.
 fn radix_sort_codes(keys: &mut Vec<u64>) {
+    if keys.len() > SORT_RUN && rayon::current_num_threads() >= 4 {
+        par_sort_codes(keys);
+        return;
+    }
     let mut tmp = vec![0u64; keys.len()];
     for pass in 0..3 {
         let shift = 32 + 10 * pass;
@@ -604,6 +608,55 @@ fn radix_sort_codes(keys: &mut Vec<u64>) {
         }
         std::mem::swap(keys, &mut tmp);
     }
+}
+
+/// Keys per run of [`par_sort_codes`].
+const SORT_RUN: usize = 1 << 16;
+
+/// [`radix_sort_codes`] on many threads: the keys are unique (each holds
+/// its primitive's index), so any sort orders them alike, and this one
+/// runs in parallel. Each run of [`SORT_RUN`] keys is sorted by its top
+/// ten code bits (a counting sort); each of the 1 024 digits then gathers
+/// its keys from run after run into its own part of the output and sorts
+/// them there.
+fn par_sort_codes(keys: &mut Vec<u64>) {
+    const DIGITS: usize = 1024;
+    let digit = |k: u64| ((k >> 52) & 1023) as usize;
+    let runs: Vec<(Vec<u64>, Vec<usize>)> = keys
+        .par_chunks(SORT_RUN)
+        .map(|run| {
+            let mut start = vec![0usize; DIGITS + 1];
+            for &k in run {
+                start[digit(k) + 1] += 1;
+            }
+            for d in 0..DIGITS {
+                start[d + 1] += start[d];
+            }
+            let mut fill = start.clone();
+            let mut sorted = vec![0u64; run.len()];
+            for &k in run {
+                let d = digit(k);
+                sorted[fill[d]] = k;
+                fill[d] += 1;
+            }
+            (sorted, start)
+        })
+        .collect();
+    let mut parts: Vec<&mut [u64]> = Vec::with_capacity(DIGITS);
+    let mut rest = keys.as_mut_slice();
+    for d in 0..DIGITS {
+        let n: usize = runs.iter().map(|(_, s)| s[d + 1] - s[d]).sum();
+        parts.push(take_front(&mut rest, n));
+    }
+    parts.into_par_iter().enumerate().for_each(|(d, part)| {
+        let mut at = 0;
+        for (sorted, start) in &runs {
+            let from = &sorted[start[d]..start[d + 1]];
+            part[at..at + from.len()].copy_from_slice(from);
+            at += from.len();
+        }
+        part.sort_unstable();
+    });
 }
 
 /// The children of an 8-wide node over the binary `node`: up to [`WIDTH`]
@@ -2704,13 +2757,14 @@ mod tests {
 
     /// The build's parallel passes (the boxes and their bounds, the
     /// Morton codes, the partitions, the collapse into 8-wide nodes that
-    /// fills its subtrees' places in parallel) give the same tree, bit
+    /// fills its subtrees' places in parallel, the codes' sort) give the same tree, bit
     /// for bit, on 1, 2, 3 and 8 threads, for both builds: the images'
-    /// thread invariance rests on it. 60 000 triangles put every parallel
-    /// path to work (they start above 4 096 triangles or 1 024 packs).
+    /// thread invariance rests on it. 70 000 triangles put every parallel
+    /// path to work (they start above 4 096 triangles or 1 024 packs; the
+    /// Morton codes' parallel sort above 65 536 keys on 4 threads or more).
     #[test]
     fn the_tree_is_the_same_at_every_thread_count() {
-        let tris = soup(60_000, 7, 0.01);
+        let tris = soup(70_000, 7, 0.01);
         for tree in [Tree::Sah, Tree::Morton] {
             let at = |threads: usize| {
                 let pool = rayon::ThreadPoolBuilder::new()
@@ -2849,6 +2903,25 @@ mod tests {
         want.sort_unstable();
         radix_sort_codes(&mut keys);
         assert_eq!(keys, want);
+        // The parallel sort (four threads or more, more than one run):
+        // 300 000 keys, codes over all 30 bits, some repeated.
+        let mut keys: Vec<u64> = (0..300_000u64)
+            .map(|k| {
+                z ^= z << 13;
+                z ^= z >> 7;
+                z ^= z << 17;
+                let code = (z >> 34) & 0x3FFF_FFFF & !(0xFF << (8 * (k % 4)));
+                (code << 32) | k
+            })
+            .collect();
+        let mut want = keys.clone();
+        want.sort_unstable();
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(4)
+            .build()
+            .unwrap();
+        pool.install(|| radix_sort_codes(&mut keys));
+        assert!(keys == want, "the parallel sort orders as the serial one");
         assert_eq!(spread3(0b11_1111_1111), 0x0924_9249);
         assert_eq!(spread3(0b10_0000_0001), (1 << 27) | 1);
     }

@@ -15,6 +15,7 @@ mod triangle;
 use bvh::Bvh;
 pub use bvh::{BvhHit, BvhStats};
 use light_buffer::{Cell, LightBuffers};
+use rayon::prelude::*;
 use rendiff_core::analytic::sphere::sphere_roots;
 use rendiff_core::color::Rgb;
 use rendiff_core::math::{DVec3, Ray64, Vec3, to_f64};
@@ -136,7 +137,10 @@ impl<'s> Accel<'s> {
         for &k in &analytic {
             analytic_object[scene.analytic[k].object as usize] = true;
         }
+        // (The passes over every triangle run in parallel; rayon's
+        // collects keep the order.)
         let ids: Vec<u32> = (0..u32::try_from(scene.len()).unwrap_or(u32::MAX))
+            .into_par_iter()
             .filter(|&t| !analytic_object[scene.tri_object[t as usize] as usize])
             .collect();
         let tree = match (opts.bvh, opts.build) {
@@ -156,6 +160,7 @@ impl<'s> Accel<'s> {
             }
         };
         let class: Vec<ShadowClass> = (0..scene.len())
+            .into_par_iter()
             .map(|t| class_of(scene.tri_object[t], scene.tri_material[t]))
             .collect();
         let analytic_class: Vec<ShadowClass> = scene

@@ -63,6 +63,7 @@
 //! below the `f64` rounding of its coordinates (a corner one ulp from
 //! another), whose edge function can take the wrong sign far beyond it.
 
+use rayon::prelude::*;
 use rendiff_core::math::{DVec3, Ray64, Vec3, to_f64};
 use rendiff_core::shade::LightKind;
 use rendiff_core::tri_scene::TriScene;
@@ -73,6 +74,8 @@ use super::bvh::Bvh;
 /// A triangle nearer the light than `NEAR·S` is tested on every ray
 /// toward it (see the module's argument).
 const NEAR: f64 = 1e-4;
+/// Casters per run of the build's parallel passes.
+const RUN: usize = 1024;
 
 /// How far a triangle's projected box is widened, in the cube faces'
 /// `u, v` (see the module's argument: rounding moves them by under
@@ -327,13 +330,23 @@ impl LightBuffer {
         ids: &[u32],
         store: &mut LightBuffers,
     ) -> Option<LightBuffer> {
-        // S: every coordinate of the casters and the light.
-        let mut s = 0.0f64;
-        for &id in ids {
-            for p in scene.triangle(id) {
-                s = s.max(to_f64(p).abs().max_element());
-            }
-        }
+        // S: every coordinate of the casters and the light. (The passes
+        // over all the casters run in runs of `RUN`, in parallel, joined
+        // in id order: the same S and entries at any thread count.)
+        let mut s = ids
+            .par_chunks(RUN)
+            .map(|run| {
+                let mut s = 0.0f64;
+                for &id in run {
+                    for p in scene.triangle(id) {
+                        s = s.max(to_f64(p).abs().max_element());
+                    }
+                }
+                s
+            })
+            .collect::<Vec<f64>>()
+            .into_iter()
+            .fold(0.0f64, f64::max);
         let (shape, ngrids) = match kind {
             LightKind::Point { position } => {
                 let at = to_f64(position);
@@ -363,9 +376,6 @@ impl LightBuffer {
         if !(s.is_finite() && s > 0.0) {
             return None;
         }
-        // Each triangle's widened boxes, and the triangles every ray tests.
-        let mut entries = Vec::new();
-        let mut near = Vec::new();
         // A parallel light's margin (see the module's argument): 10⁻⁹·S,
         // and ten times `t` (under 6S) by how far the plane's computed
         // axes are from square to `D`.
@@ -376,31 +386,23 @@ impl LightBuffer {
             }
             Shape::Point { .. } => 0.0,
         };
-        for &id in ids {
-            let v = scene.triangle(id).map(to_f64);
-            match shape {
-                Shape::Point { at } => {
-                    point_entries(id, v, at, s, &mut entries, &mut near);
+        // Each triangle's widened boxes, and the triangles every ray tests.
+        let runs: Vec<(Vec<Entry>, Vec<u32>)> = ids
+            .par_chunks(RUN)
+            .map(|run| {
+                let mut entries = Vec::with_capacity(run.len());
+                let mut near = Vec::new();
+                for &id in run {
+                    entry(scene, id, shape, s, margin, &mut entries, &mut near);
                 }
-                Shape::Parallel { a, b, .. } => {
-                    let x = v.map(|p| a.dot(p));
-                    let y = v.map(|p| b.dot(p));
-                    let lo = [
-                        x[0].min(x[1]).min(x[2]) - margin,
-                        y[0].min(y[1]).min(y[2]) - margin,
-                    ];
-                    let hi = [
-                        x[0].max(x[1]).max(x[2]) + margin,
-                        y[0].max(y[1]).max(y[2]) + margin,
-                    ];
-                    entries.push(Entry {
-                        grid: 0,
-                        lo,
-                        hi,
-                        tri: id,
-                    });
-                }
-            }
+                (entries, near)
+            })
+            .collect();
+        let mut entries = Vec::with_capacity(runs.iter().map(|r| r.0.len()).sum());
+        let mut near = Vec::new();
+        for (e, n) in runs {
+            entries.extend(e);
+            near.extend(n);
         }
         if near.len() > MAX_LIST {
             return None;
@@ -537,6 +539,42 @@ impl LightBuffer {
             cells,
             bound: 2.0 * s,
         })
+    }
+}
+
+/// The entries of caster `id` for a light of shape `shape` (see
+/// [`point_entries`]; a parallel light's one box in its plane, widened
+/// by `margin`), or `id` in `near`.
+fn entry(
+    scene: &TriScene,
+    id: u32,
+    shape: Shape,
+    s: f64,
+    margin: f64,
+    entries: &mut Vec<Entry>,
+    near: &mut Vec<u32>,
+) {
+    let v = scene.triangle(id).map(to_f64);
+    match shape {
+        Shape::Point { at } => point_entries(id, v, at, s, entries, near),
+        Shape::Parallel { a, b, .. } => {
+            let x = v.map(|p| a.dot(p));
+            let y = v.map(|p| b.dot(p));
+            let lo = [
+                x[0].min(x[1]).min(x[2]) - margin,
+                y[0].min(y[1]).min(y[2]) - margin,
+            ];
+            let hi = [
+                x[0].max(x[1]).max(x[2]) + margin,
+                y[0].max(y[1]).max(y[2]) + margin,
+            ];
+            entries.push(Entry {
+                grid: 0,
+                lo,
+                hi,
+                tri: id,
+            });
+        }
     }
 }
 
