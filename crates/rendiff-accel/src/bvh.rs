@@ -364,9 +364,18 @@ fn build_binary(
         best
     };
     let (mid, lb, rb) = match best {
-        Some((axis, split, cost)) if cost < leaf_cost || n > MAX_LEAF => partition(prims, |p| {
-            bins_of(p.centroid2(), cbounds.lo, scale, nb)[axis] < split
-        }),
+        Some((axis, split, cost)) if cost < leaf_cost || n > MAX_LEAF => {
+            let left = |p: &PrimRef| bins_of(p.centroid2(), cbounds.lo, scale, nb)[axis] < split;
+            // Both leave the same order; one thread takes the one pass.
+            // (Their bounds can differ only in the sign of a zero, which
+            // `unsigned_zeros` removes: the same tree at any thread count.)
+            let (mid, l, r) = if n > 4 * PARTITION_BLOCK && rayon::current_num_threads() > 1 {
+                par_partition(prims, left)
+            } else {
+                partition(prims, left)
+            };
+            (mid, unsigned_zeros(l), unsigned_zeros(r))
+        }
         Some(_) => return leaf,
         None if n <= MAX_LEAF => return leaf,
         None => {
@@ -555,6 +564,162 @@ fn partition(
         return (mid, bounds_of(l), bounds_of(r));
     }
     (i, left, right)
+}
+
+/// Bounds with every −0 made +0: the minima and maxima of a set of
+/// numbers are the same in any order but for the sign of a zero (the
+/// minimum of −0 and +0 is whichever came second), so bounds taken in
+/// different orders agree bit for bit once zeros are unsigned.
+fn unsigned_zeros((b, c): (Box4, Box4)) -> (Box4, Box4) {
+    let fix = |v: Vec4| v + Vec4::ZERO;
+    (
+        Box4 {
+            lo: fix(b.lo),
+            hi: fix(b.hi),
+        },
+        Box4 {
+            lo: fix(c.lo),
+            hi: fix(c.hi),
+        },
+    )
+}
+
+/// Primitives per block of [`par_partition`], and the least node it
+/// partitions (below, [`partition`]'s one pass is the cheaper).
+const PARTITION_BLOCK: usize = 1 << 14;
+
+/// [`partition`] of a large node in parallel, with the same result: the
+/// two-cursor pass swaps the k-th element from the left that belongs
+/// right (among the first `mid`, `mid` the count that belong left) with
+/// the k-th element from the right that belongs left (among the rest),
+/// for every k, and touches nothing else. Here the first `mid` are cut
+/// into fixed blocks; each block's misplaced elements are a run of k, so
+/// their partners lie in a run of the right side that no other block's
+/// do, and the blocks swap with their runs in parallel. The bounds of
+/// each side are those of the elements that belong to it, taken in the
+/// counting pass.
+fn par_partition(
+    prims: &mut [PrimRef],
+    pred: impl Fn(&PrimRef) -> bool + Sync,
+) -> (usize, (Box4, Box4), (Box4, Box4)) {
+    let n = prims.len();
+    // The two sides are the elements that belong to each, wherever they
+    // lie: their counts and bounds in one pass, block by block, the
+    // blocks joined in order.
+    let sides: Vec<(usize, [(Box4, Box4); 2])> = prims
+        .par_chunks(PARTITION_BLOCK)
+        .map(|b| {
+            let mut count = 0;
+            let (mut l, mut lc, mut r, mut rc) =
+                (Box4::EMPTY, Box4::EMPTY, Box4::EMPTY, Box4::EMPTY);
+            for p in b {
+                let c = p.centroid2();
+                if pred(p) {
+                    count += 1;
+                    l.grow(p.lo, p.hi);
+                    lc.grow(c, c);
+                } else {
+                    r.grow(p.lo, p.hi);
+                    rc.grow(c, c);
+                }
+            }
+            (count, [(l, lc), (r, rc)])
+        })
+        .collect();
+    let mut mid = 0;
+    let mut bounds = [(Box4::EMPTY, Box4::EMPTY); 2];
+    for (count, side) in &sides {
+        mid += count;
+        for (b, s) in bounds.iter_mut().zip(side) {
+            b.0.grow(s.0.lo, s.0.hi);
+            b.1.grow(s.1.lo, s.1.hi);
+        }
+    }
+    if mid == 0 || mid == n {
+        let mid = n / 2;
+        let (l, r) = prims.split_at(mid);
+        return (mid, bounds_of(l), bounds_of(r));
+    }
+    let (left, right) = prims.split_at_mut(mid);
+    // Per block of the left side, its misplaced elements; their runs of k.
+    let wrong: Vec<usize> = left
+        .par_chunks(PARTITION_BLOCK)
+        .map(|b| b.iter().filter(|p| !pred(p)).count())
+        .collect();
+    let mut first_k = Vec::with_capacity(wrong.len() + 1);
+    let mut k = 0;
+    for w in &wrong {
+        first_k.push(k);
+        k += w;
+    }
+    let misplaced = k;
+    // The right side's misplaced elements counted per block from its end.
+    let right_len = right.len();
+    let from_end: Vec<usize> = right
+        .par_rchunks(PARTITION_BLOCK)
+        .map(|b| b.iter().filter(|p| pred(p)).count())
+        .collect();
+    let mut before = Vec::with_capacity(from_end.len());
+    let mut k = 0;
+    for c in &from_end {
+        before.push(k);
+        k += c;
+    }
+    // Where the right side's run of block i ends: just after its k-th
+    // misplaced element from the end (k = the block's first), the end
+    // itself for k = 0; the last run reaches the start.
+    let right_ref: &[PrimRef] = right;
+    let cut = |k: usize| -> usize {
+        if k == 0 {
+            return right_len;
+        }
+        if k >= misplaced {
+            return 0;
+        }
+        // The block (from the end) holding it, then its place there.
+        let q = before.partition_point(|&b| b <= k) - 1;
+        let hi = right_len - q * PARTITION_BLOCK;
+        let lo = hi.saturating_sub(PARTITION_BLOCK);
+        let mut seen = before[q];
+        for at in (lo..hi).rev() {
+            if pred(&right_ref[at]) {
+                if seen == k {
+                    return at + 1;
+                }
+                seen += 1;
+            }
+        }
+        lo
+    };
+    let ends: Vec<usize> = first_k.par_iter().map(|&k| cut(k)).collect();
+    // The runs, block 0's at the right end, each the next to the left.
+    let mut runs: Vec<&mut [PrimRef]> = Vec::with_capacity(ends.len());
+    let mut rest: &mut [PrimRef] = right;
+    for (i, &end) in ends.iter().enumerate() {
+        let start = ends.get(i + 1).copied().unwrap_or(0);
+        let whole = std::mem::take(&mut rest);
+        let (keep, run) = whole[..end].split_at_mut(start);
+        runs.push(run);
+        rest = keep;
+    }
+    left.par_chunks_mut(PARTITION_BLOCK)
+        .zip(runs)
+        .for_each(|(block, run)| {
+            let mut r = run.len();
+            for x in block.iter_mut() {
+                if !pred(x) {
+                    // (The run holds exactly as many that belong left.)
+                    while r > 0 {
+                        r -= 1;
+                        if pred(&run[r]) {
+                            std::mem::swap(x, &mut run[r]);
+                            break;
+                        }
+                    }
+                }
+            }
+        });
+    (mid, bounds[0], bounds[1])
 }
 
 /// How the binary tree under the 8-wide nodes is built.
@@ -2730,6 +2895,52 @@ mod tests {
 
     fn build(tris: &[[Vec3; 3]], flat: bool) -> Bvh {
         build_tree(tris, if flat { Tree::Flat } else { Tree::Sah })
+    }
+
+    /// The parallel partition leaves exactly the order (and the bounds)
+    /// the two-cursor pass leaves, for predicates that split by position
+    /// (as the SAH's do), at random, and with a few elements on one side;
+    /// on 1 and 4 threads.
+    #[test]
+    fn the_parallel_partition_is_the_two_cursor_pass() {
+        let tris = soup(200_000, 3, 0.01);
+        let prims: Vec<PrimRef> = tris
+            .iter()
+            .enumerate()
+            .map(|(k, t)| prim_ref(k, *t))
+            .collect();
+        let bits = |b: &(Box4, Box4)| {
+            [b.0.lo, b.0.hi, b.1.lo, b.1.hi].map(|v| v.to_array().map(f32::to_bits))
+        };
+        let preds: [&(dyn Fn(&PrimRef) -> bool + Sync); 4] = [
+            &|p| p.centroid2().x < 1.0,
+            &|p| p.index().wrapping_mul(2_654_435_761) >> 31 == 0,
+            &|p| p.index() % 50_000 == 7,
+            &|p| p.index() % 50_000 != 7,
+        ];
+        for (i, pred) in preds.iter().enumerate() {
+            let mut want = prims.clone();
+            let (mid, l, r) = partition(&mut want, pred);
+            for threads in [1, 4] {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                let mut got = prims.clone();
+                let (m, gl, gr) = pool.install(|| par_partition(&mut got, pred));
+                assert_eq!(m, mid, "predicate {i}, {threads} threads");
+                let order = |v: &[PrimRef]| v.iter().map(PrimRef::index).collect::<Vec<_>>();
+                assert!(
+                    order(&got) == order(&want),
+                    "predicate {i}, {threads} threads: order"
+                );
+                assert_eq!(
+                    (bits(&gl), bits(&gr)),
+                    (bits(&l), bits(&r)),
+                    "predicate {i}"
+                );
+            }
+        }
     }
 
     /// Every bit of a built tree: nodes, packs, ids, root and depth.
