@@ -168,14 +168,14 @@ impl Frame {
             width,
             height,
             samples,
-            color: vec![background; n],
+            color: filled(n, background),
             sample_color: if samples == 1 {
                 Vec::new()
             } else {
-                vec![background; ns]
+                filled(ns, background)
             },
-            depth: vec![f32::INFINITY; ns],
-            id: vec![BACKGROUND; ns],
+            depth: filled(ns, f32::INFINITY),
+            id: filled(ns, BACKGROUND),
             flags: vec![0; ns],
         }
     }
@@ -321,7 +321,7 @@ pub const GBUFFER_FILES: [&str; 4] = ["depth.pfm", "id.png", "flags.png", "color
 /// Large buffers are written in parallel.
 pub fn refill<T: Clone + Send + Sync>(v: &mut Vec<T>, len: usize, value: T) {
     if v.capacity() < len {
-        *v = vec![value; len];
+        *v = filled(len, value);
     } else {
         v.truncate(len);
         v.par_iter_mut()
@@ -329,6 +329,18 @@ pub fn refill<T: Clone + Send + Sync>(v: &mut Vec<T>, len: usize, value: T) {
             .for_each(|x| *x = value.clone());
         v.resize(len, value);
     }
+}
+
+/// `len` copies of `value`, a large vector written in parallel (its
+/// fresh pages first touched by the threads that fill them, a serial
+/// tail of a small frame on many threads otherwise).
+fn filled<T: Clone + Send + Sync>(len: usize, value: T) -> Vec<T> {
+    if len < 1 << 16 {
+        return vec![value; len];
+    }
+    let mut v = Vec::with_capacity(len);
+    v.par_extend(rayon::iter::repeat_n(value, len));
+    v
 }
 
 /// Bands a frame's parallel passes want per thread of the pool: a band is
