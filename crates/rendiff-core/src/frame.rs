@@ -316,9 +316,8 @@ impl Frame {
 pub const GBUFFER_FILES: [&str; 4] = ["depth.pfm", "id.png", "flags.png", "color.png"];
 
 /// `v` made `len` copies of `value`: in its own memory where that is large
-/// enough, else in a new vector (`vec!`, which takes zeros straight from
-/// the allocator's zeroed pages instead of writing them).
-/// Large buffers are written in parallel.
+/// enough, else in a new vector. Large buffers are written in parallel
+/// (a new one by the threads that then own its fresh pages).
 pub fn refill<T: Clone + Send + Sync>(v: &mut Vec<T>, len: usize, value: T) {
     if v.capacity() < len {
         *v = filled(len, value);
@@ -349,9 +348,8 @@ fn filled<T: Clone + Send + Sync>(len: usize, value: T) -> Vec<T> {
 const BANDS_PER_THREAD: u32 = 16;
 
 /// The sample rows of a pass's bands over `height` rows: `preferred`,
-/// or fewer where that would leave fewer than [`BANDS_PER_THREAD`] bands
-/// for each thread of the current rayon pool, down to `least`; a multiple
-/// of `step`. The bands only divide the work: every sample is computed
+/// or fewer where that would leave fewer than 16 bands for each thread
+/// of the current rayon pool, down to `least`; a multiple of `step`. The bands only divide the work: every sample is computed
 /// alike whatever their height, so the frame is the same at every thread
 /// count.
 #[must_use]
