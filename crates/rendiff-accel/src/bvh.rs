@@ -2918,6 +2918,14 @@ mod tests {
             &|p| p.index() % 50_000 == 7,
             &|p| p.index() % 50_000 != 7,
         ];
+        // Bounds taken in two orders agree once their zeros are unsigned
+        // (with SSE's `minps`, min(+0, −0) is −0 and min(−0, +0) is +0).
+        let plus = prim_ref(0, [Vec3::new(0.0, 1.0, 1.0); 3]);
+        let minus = prim_ref(1, [Vec3::new(-0.0, 1.0, 1.0); 3]);
+        let (ab, ba) = (bounds_of(&[plus, minus]), bounds_of(&[minus, plus]));
+        let (ab, ba) = (unsigned_zeros(ab), unsigned_zeros(ba));
+        assert_eq!(bits(&ab), bits(&ba));
+        assert_eq!(ab.0.lo.x.to_bits(), 0, "+0");
         for (i, pred) in preds.iter().enumerate() {
             let mut want = prims.clone();
             let (mid, l, r) = partition(&mut want, pred);
@@ -2975,14 +2983,32 @@ mod tests {
     /// Morton codes' parallel sort above 65 536 keys on 4 threads or more).
     #[test]
     fn the_tree_is_the_same_at_every_thread_count() {
-        let tris = soup(70_000, 7, 0.01);
-        for tree in [Tree::Sah, Tree::Morton] {
+        // A plain soup, and one with a third of its x coordinates exactly
+        // +0 or −0 (a mesh on a plane through the origin, mirrored): the
+        // bounds that the serial and the parallel passes take in different
+        // orders may differ only in a zero's sign, which must not reach
+        // the tree.
+        let plain = soup(70_000, 7, 0.01);
+        let mut zeros = soup(70_000, 9, 0.01);
+        for (k, t) in zeros.iter_mut().enumerate() {
+            for (c, v) in t.iter_mut().enumerate() {
+                if (k + c) % 3 == 0 {
+                    v.x = if (k + c) % 2 == 0 { 0.0 } else { -0.0 };
+                }
+            }
+        }
+        for (tris, tree) in [
+            (&plain, Tree::Sah),
+            (&plain, Tree::Morton),
+            (&zeros, Tree::Sah),
+            (&zeros, Tree::Morton),
+        ] {
             let at = |threads: usize| {
                 let pool = rayon::ThreadPoolBuilder::new()
                     .num_threads(threads)
                     .build()
                     .unwrap();
-                pool.install(|| tree_bits(&build_tree(&tris, tree)))
+                pool.install(|| tree_bits(&build_tree(tris, tree)))
             };
             let one = at(1);
             assert!(one.len() > 100_000, "{tree:?}: a tree of many nodes");
