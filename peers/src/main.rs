@@ -590,79 +590,29 @@ fn embree_cmp(scene: &Path, subdivide: u32, build: BvhBuild, repeats: usize) -> 
         });
         let accel = Accel::new(&tri, opts);
         let emb = embree::EmbreeScene::new(&positions, &tri.tris, &config)?;
-        let count = |f: &(dyn Fn(&Ray64) -> bool + Sync)| {
-            let hits: usize = rays
-                .par_chunks(4096)
-                .map(|c| c.iter().filter(|r| f(r)).count())
-                .sum();
-            std::hint::black_box(hits);
-        };
-        let t_ours = time_ms(&p, repeats, &|| count(&|r| accel.intersect(r).is_some()));
+        let t_ours = time_ms(&p, repeats, &|| {
+            std::hint::black_box(ours_primary(&accel, &rays));
+        });
         let t_emb = time_ms(&p, repeats, &|| {
-            count(&|r| {
-                let (o, d, t0, t1) = embree_ray(r);
-                emb.intersect(o, d, t0, t1).is_some()
-            });
+            std::hint::black_box(embree_primary(&emb, &rays));
         });
         // Coherent: 4×2 blocks, Embree's rtcIntersect8 against our packets
         // of the same eight rays (`Accel::intersect_packets`).
         let t_packet = time_ms(&p, repeats, &|| {
-            let hits: usize = blocks
-                .par_chunks(512)
-                .map(|c| {
-                    let mut out = [None; 8];
-                    c.iter()
-                        .map(|b| {
-                            let out = &mut out[..b.len()];
-                            accel.intersect_packets(b, out);
-                            out.iter().filter(|h| h.is_some()).count()
-                        })
-                        .sum::<usize>()
-                })
-                .sum();
-            std::hint::black_box(hits);
+            std::hint::black_box(ours_packets(&accel, &blocks));
         });
         let t_emb8 = time_ms(&p, repeats, &|| {
-            let hits: usize = blocks
-                .par_chunks(512)
-                .map(|c| {
-                    c.iter()
-                        .map(|b| {
-                            let r: Vec<embree::EmbreeRay> = b.iter().map(embree_ray).collect();
-                            emb.intersect8(&r).iter().filter(|h| h.is_some()).count()
-                        })
-                        .sum::<usize>()
-                })
-                .sum();
-            std::hint::black_box(hits);
+            std::hint::black_box(embree_packets(&emb, &blocks));
         });
         // Shadow rays: from every visible point to the light, as shading
         // casts them (eight neighbours at a time, `transmittance_packets`).
         let shadow = shadow_rays(&tri, &accel);
         let vis = ShadowRays::new(&accel);
         let t_shadow = time_ms(&p, repeats, &|| {
-            let n: usize = shadow
-                .par_chunks(4096)
-                .map(|c| {
-                    let mut out = vec![rendiff::color::Rgb::WHITE; c.len()];
-                    vis.transmittance_packets(c, &mut out);
-                    out.iter().filter(|t| t.is_black()).count()
-                })
-                .sum();
-            std::hint::black_box(n);
+            std::hint::black_box(ours_blocked(&vis, &shadow));
         });
         let t_emb_shadow = time_ms(&p, repeats, &|| {
-            let n: usize = shadow
-                .par_chunks(4096)
-                .map(|c| {
-                    c.iter()
-                        .filter(|q| {
-                            emb.occluded(q.origin.to_array(), q.dir.to_array(), 0.0, q.t_max)
-                        })
-                        .count()
-                })
-                .sum();
-            std::hint::black_box(n);
+            std::hint::black_box(embree_blocked(&emb, &shadow));
         });
         let mrays = |n: usize, ms: f64| n as f64 / ms / 1e3;
         println!(
@@ -701,6 +651,84 @@ fn embree_cmp(scene: &Path, subdivide: u32, build: BvhBuild, repeats: usize) -> 
         }
     }
     Ok(figures)
+}
+
+/// Primary rays that hit, ours one at a time, in parallel runs.
+fn ours_primary(accel: &Accel<'_>, rays: &[Ray64]) -> usize {
+    rays.par_chunks(4096)
+        .map(|c| c.iter().filter(|r| accel.intersect(r).is_some()).count())
+        .sum()
+}
+
+/// The same with Embree's `rtcIntersect1` (the rays rounded to f32).
+fn embree_primary(emb: &embree::EmbreeScene, rays: &[Ray64]) -> usize {
+    rays.par_chunks(4096)
+        .map(|c| {
+            c.iter()
+                .filter(|r| {
+                    let (o, d, t0, t1) = embree_ray(r);
+                    emb.intersect(o, d, t0, t1).is_some()
+                })
+                .count()
+        })
+        .sum()
+}
+
+/// Primary rays that hit, ours in packets of a 4×2 block each.
+fn ours_packets(accel: &Accel<'_>, blocks: &[Vec<Ray64>]) -> usize {
+    blocks
+        .par_chunks(512)
+        .map(|c| {
+            let mut out = [None; 8];
+            c.iter()
+                .map(|b| {
+                    let out = &mut out[..b.len()];
+                    accel.intersect_packets(b, out);
+                    out.iter().filter(|h| h.is_some()).count()
+                })
+                .sum::<usize>()
+        })
+        .sum()
+}
+
+/// The same with Embree's `rtcIntersect8`.
+fn embree_packets(emb: &embree::EmbreeScene, blocks: &[Vec<Ray64>]) -> usize {
+    blocks
+        .par_chunks(512)
+        .map(|c| {
+            c.iter()
+                .map(|b| {
+                    let r: Vec<embree::EmbreeRay> = b.iter().map(embree_ray).collect();
+                    emb.intersect8(&r).iter().filter(|h| h.is_some()).count()
+                })
+                .sum::<usize>()
+        })
+        .sum()
+}
+
+/// Shadow queries blocked, ours (`transmittance_packets`, eight
+/// neighbours at a time), in parallel runs.
+fn ours_blocked(vis: &ShadowRays<'_, '_>, shadow: &[rendiff::shade::ShadowQuery]) -> usize {
+    shadow
+        .par_chunks(4096)
+        .map(|c| {
+            let mut out = vec![rendiff::color::Rgb::WHITE; c.len()];
+            vis.transmittance_packets(c, &mut out);
+            out.iter().filter(|t| t.is_black()).count()
+        })
+        .sum()
+}
+
+/// The same with Embree's `rtcOccluded1`.
+fn embree_blocked(emb: &embree::EmbreeScene, shadow: &[rendiff::shade::ShadowQuery]) -> usize {
+    shadow
+        .par_chunks(4096)
+        .map(|c| {
+            c.iter()
+                .filter(|q| emb.occluded(q.origin.to_array(), q.dir.to_array(), 0.0, q.t_max))
+                .count()
+        })
+        .sum()
 }
 
 /// The shadow queries of a frame: one from every visible point of the

@@ -26,12 +26,14 @@ use std::process::Command;
 use std::time::Instant;
 
 use anyhow::{Result, bail};
-use rayon::prelude::*;
 use rendiff::accel::{Accel, AccelOptions, BvhBuild, ShadowRays};
 use rendiff::frame::Frame;
 use rendiff::{Backend, Overrides, Prepared, raster};
 
-use crate::{camera_rays, embree, embree_ray, median, pool, shadow_rays, time_ms};
+use crate::{
+    camera_rays, embree, embree_blocked, embree_packets, embree_primary, median, ours_blocked,
+    ours_packets, ours_primary, pool, shadow_rays, time_ms,
+};
 
 /// FNV-1a over every bit a frame stores.
 fn frame_hash(f: &Frame) -> u64 {
@@ -159,90 +161,28 @@ pub fn scaling(threads: &[usize], repeats: usize) -> Result<()> {
         }));
         let accel = p.install(|| Accel::new(&tri, sah));
         let emb = embree::EmbreeScene::new(&positions, &tri.tris, &config)?;
-        let primary = || -> usize {
-            rays.par_chunks(4096)
-                .map(|c| c.iter().filter(|r| accel.intersect(r).is_some()).count())
-                .sum()
-        };
         ms.push(time_ms(&p, repeats, &|| {
-            std::hint::black_box(primary());
+            std::hint::black_box(ours_primary(&accel, &rays));
         }));
         ms.push(time_ms(&p, repeats, &|| {
-            let hits: usize = rays
-                .par_chunks(4096)
-                .map(|c| {
-                    c.iter()
-                        .filter(|r| {
-                            let (o, d, t0, t1) = embree_ray(r);
-                            emb.intersect(o, d, t0, t1).is_some()
-                        })
-                        .count()
-                })
-                .sum();
-            std::hint::black_box(hits);
-        }));
-        let packets = || -> usize {
-            blocks
-                .par_chunks(512)
-                .map(|c| {
-                    let mut out = [None; 8];
-                    c.iter()
-                        .map(|b| {
-                            let out = &mut out[..b.len()];
-                            accel.intersect_packets(b, out);
-                            out.iter().filter(|h| h.is_some()).count()
-                        })
-                        .sum::<usize>()
-                })
-                .sum()
-        };
-        ms.push(time_ms(&p, repeats, &|| {
-            std::hint::black_box(packets());
+            std::hint::black_box(embree_primary(&emb, &rays));
         }));
         ms.push(time_ms(&p, repeats, &|| {
-            let hits: usize = blocks
-                .par_chunks(512)
-                .map(|c| {
-                    c.iter()
-                        .map(|b| {
-                            let r: Vec<embree::EmbreeRay> = b.iter().map(embree_ray).collect();
-                            emb.intersect8(&r).iter().filter(|h| h.is_some()).count()
-                        })
-                        .sum::<usize>()
-                })
-                .sum();
-            std::hint::black_box(hits);
+            std::hint::black_box(ours_packets(&accel, &blocks));
+        }));
+        ms.push(time_ms(&p, repeats, &|| {
+            std::hint::black_box(embree_packets(&emb, &blocks));
         }));
         let vis = ShadowRays::new(&accel);
-        let blocked = || -> usize {
-            shadow
-                .par_chunks(4096)
-                .map(|c| {
-                    let mut out = vec![rendiff::color::Rgb::WHITE; c.len()];
-                    vis.transmittance_packets(c, &mut out);
-                    out.iter().filter(|t| t.is_black()).count()
-                })
-                .sum()
-        };
         ms.push(time_ms(&p, repeats, &|| {
-            std::hint::black_box(blocked());
+            std::hint::black_box(ours_blocked(&vis, &shadow));
         }));
         ms.push(time_ms(&p, repeats, &|| {
-            let n: usize = shadow
-                .par_chunks(4096)
-                .map(|c| {
-                    c.iter()
-                        .filter(|q| {
-                            emb.occluded(q.origin.to_array(), q.dir.to_array(), 0.0, q.t_max)
-                        })
-                        .count()
-                })
-                .sum();
-            std::hint::black_box(n);
+            std::hint::black_box(embree_blocked(&emb, &shadow));
         }));
-        seen.push(p.install(primary) as u64);
-        seen.push(p.install(packets) as u64);
-        seen.push(p.install(blocked) as u64);
+        seen.push(p.install(|| ours_primary(&accel, &rays)) as u64);
+        seen.push(p.install(|| ours_packets(&accel, &blocks)) as u64);
+        seen.push(p.install(|| ours_blocked(&vis, &shadow)) as u64);
         drop(emb);
 
         // The shaded frames, each drawn frame after frame into the same

@@ -210,7 +210,7 @@ enum BNode {
 /// the root of an 8-wide node: a node of its own and, for each child that
 /// [`gather`] gives it, that child's (a leaf child: its packs). Counted as
 /// the binary tree is built (each inner node from the counts its
-/// gathered descendants already hold), so that [`Bvh::collapse`] knows
+/// gathered descendants already hold), so that [`collapse`] knows
 /// where every subtree's nodes and packs go before it writes them, and
 /// writes them in parallel.
 #[derive(Clone, Copy, Debug, Default)]
@@ -1182,6 +1182,16 @@ fn collapse<F: Fn(u32) -> [Vec3; 3] + Sync>(
     }
     n.used = (1 << lane) - 1;
     *out.root = n;
+    // The tallies place every node and pack: the node's own share is
+    // used up exactly.
+    debug_assert!(
+        packs.is_empty() && ids.is_empty(),
+        "the leaf children's packs fill their places"
+    );
+    debug_assert!(
+        below.is_empty() && kid_packs.is_empty() && kid_ids.is_empty() && roots.next().is_none(),
+        "the inner children's subtrees fill theirs"
+    );
     let run = |job: &mut Option<(&BNode, Out<'_>)>| {
         job.take()
             .map_or(0, |(kid, out)| collapse(kid, out, leaves))
@@ -1236,11 +1246,12 @@ fn pack_of<F: Fn(u32) -> [Vec3; 3]>(chunk: &[u32], tri: &F) -> (TriPack, [u32; 4
     (pack, ids)
 }
 
-/// A vector of `n` copies of `f()`, written in parallel (its pages are
-/// first touched by the threads that fill them).
-fn vec_par<T: Send>(n: usize, f: impl Fn() -> T + Sync + Send) -> Vec<T> {
+/// `n` copies of `value`, written in parallel (the pages first touched
+/// by the threads that fill them). (`frame::filled` does the same for the
+/// frame's buffers; `accel` sits below `frame`, so it keeps its own.)
+fn filled<T: Copy + Send + Sync>(n: usize, value: T) -> Vec<T> {
     let mut v = Vec::with_capacity(n);
-    (0..n).into_par_iter().map(|_| f()).collect_into_vec(&mut v);
+    v.par_extend(rayon::iter::repeat_n(value, n));
     v
 }
 
@@ -1306,14 +1317,13 @@ impl Bvh {
         // doublings were a third of the Morton build), and filled in
         // parallel.
         let Tally { nodes, packs } = tree.tally();
-        bvh.nodes = vec_par(nodes.max(1), empty_node);
-        bvh.packs = vec_par(packs, || TriPack::EMPTY);
-        bvh.ids = vec_par(4 * packs, || u32::MAX);
+        bvh.nodes = filled(nodes, empty_node());
+        bvh.packs = filled(packs, TriPack::EMPTY);
+        bvh.ids = filled(4 * packs, u32::MAX);
         match &tree {
             BNode::Leaf { start, count, .. } => {
                 let order = &leaves.order[*start..start + count];
                 emit_into(order, leaves.tri, &mut bvh.packs, &mut bvh.ids);
-                bvh.nodes.clear();
                 bvh.root = LEAF;
                 bvh.root_count = u32::try_from(*count).unwrap_or(0);
                 bvh.depth = 0;

@@ -349,8 +349,9 @@ const BANDS_PER_THREAD: u32 = 16;
 
 /// The sample rows of a pass's bands over `height` rows: `preferred`,
 /// or fewer where that would leave fewer than 16 bands for each thread
-/// of the current rayon pool, down to `least`; a multiple of `step`. The bands only divide the work: every sample is computed
-/// alike whatever their height, so the frame is the same at every thread
+/// of the current rayon pool, down to `least`; a multiple of `step`.
+/// The bands only divide the work: every sample is computed alike
+/// whatever their height, so the frame is the same at every thread
 /// count.
 #[must_use]
 pub fn band_rows(height: u32, preferred: u32, least: u32, step: u32) -> u32 {

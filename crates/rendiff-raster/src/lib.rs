@@ -491,46 +491,27 @@ fn visibility_into(
         backface: a.backface + c.backface,
     });
     let n_records: usize = chunks.iter().map(|c| c.0.len()).sum();
-    // The records in drawing order, in runs: the setup's chunks (id
-    // order), or for the painter's rule all of them sorted by rank (a
-    // triangle's sub-triangles stay together: stable) and cut into runs.
-    let runs: Vec<Vec<&Record>> = if let Rule::Painter(rank) = rule {
-        let mut records: Vec<&Record> = chunks.iter().flat_map(|c| &c.0).collect();
-        records.sort_by_key(|r| rank.get(r.tri as usize).copied().unwrap_or(u32::MAX));
-        records.chunks(chunk).map(<[&Record]>::to_vec).collect()
-    } else {
-        chunks.par_iter().map(|c| c.0.iter().collect()).collect()
-    };
 
-    // Bin each run's records to bands (a counting sort per run, the runs
+    // Bin each run of records to bands (a counting sort per run, the runs
     // in parallel): a band then draws run after run its part of each, so
-    // in drawing order.
+    // in drawing order. The runs: the setup's chunks (id order), or for
+    // the painter's rule all the records sorted by rank (a triangle's
+    // sub-triangles stay together: stable) and cut into runs.
     let band_h = band_rows(sh, BAND, 8, 1);
     let bands = sh.div_ceil(band_h) as usize;
-    let binned: Vec<(Vec<&Record>, Vec<u32>)> = runs
-        .par_iter()
-        .map(|run| {
-            let mut counts = vec![0u32; bands + 1];
-            for r in run {
-                for b in (r.rows.0 / band_h)..=((r.rows.1 - 1) / band_h) {
-                    counts[b as usize + 1] += 1;
-                }
-            }
-            for b in 0..bands {
-                counts[b + 1] += counts[b];
-            }
-            let mut lists: Vec<&Record> =
-                vec![run.first().copied().unwrap_or(&EMPTY_RECORD); counts[bands] as usize];
-            let mut fill = counts.clone();
-            for r in run {
-                for b in (r.rows.0 / band_h)..=((r.rows.1 - 1) / band_h) {
-                    lists[fill[b as usize] as usize] = r;
-                    fill[b as usize] += 1;
-                }
-            }
-            (lists, counts)
-        })
-        .collect();
+    let binned: Vec<(Vec<&Record>, Vec<u32>)> = if let Rule::Painter(rank) = rule {
+        let mut records: Vec<&Record> = chunks.iter().flat_map(|c| &c.0).collect();
+        records.sort_by_key(|r| rank.get(r.tri as usize).copied().unwrap_or(u32::MAX));
+        records
+            .par_chunks(chunk)
+            .map(|run| bin_to_bands(run.iter().copied(), band_h, bands))
+            .collect()
+    } else {
+        chunks
+            .par_iter()
+            .map(|c| bin_to_bands(c.0.iter(), band_h, bands))
+            .collect()
+    };
 
     let total = (sw as usize) * (sh as usize);
     let (key, id) = (&mut buffers.key, &mut buffers.id);
@@ -603,6 +584,34 @@ fn visibility_into(
         shadow_rays: 0,
         shadow_maps: 0,
     }
+}
+
+/// The records of one run listed band by band (rows of `band_h`; each
+/// record in every band its rows meet, in the run's order), and where
+/// each band's list starts (`bands + 1` offsets).
+fn bin_to_bands<'a>(
+    run: impl Iterator<Item = &'a Record> + Clone,
+    band_h: u32,
+    bands: usize,
+) -> (Vec<&'a Record>, Vec<u32>) {
+    let mut counts = vec![0u32; bands + 1];
+    for r in run.clone() {
+        for b in (r.rows.0 / band_h)..=((r.rows.1 - 1) / band_h) {
+            counts[b as usize + 1] += 1;
+        }
+    }
+    for b in 0..bands {
+        counts[b + 1] += counts[b];
+    }
+    let mut lists: Vec<&Record> = vec![&EMPTY_RECORD; counts[bands] as usize];
+    let mut fill = counts.clone();
+    for r in run {
+        for b in (r.rows.0 / band_h)..=((r.rows.1 - 1) / band_h) {
+            lists[fill[b as usize] as usize] = r;
+            fill[b as usize] += 1;
+        }
+    }
+    (lists, counts)
 }
 
 /// What the near, far and guard planes leave of a triangle.
