@@ -234,6 +234,16 @@ impl BvhBuild {
     /// scenes whose triangles sort less well (on the bundled
     /// `textured.toml` the Morton tree's walks take 14–23 % more
     /// instructions, but its few triangles make the build negligible).
+    ///
+    /// Measured again once the SAH build no longer ran on subnormal
+    /// floats (ARCHITECTURE.md, "Subnormal lanes"; `make peers` run 10's
+    /// `trees` row): the SAH build 311.8 ms against 171.7 ms in Morton
+    /// order (0.15 µs a triangle saved, no longer 0.44), shadow rays
+    /// 153.8 against 164.8 ms (0.02 µs a ray more), primary rays 203.4
+    /// against 222.1 ms (0.01 µs). The break-even is now 7–15 rays per
+    /// triangle at these walks (it was 11–15) and 1.5 at the worst case's
+    /// 0.1 µs a shadow ray (it was 4.4); four lies between them and is
+    /// kept.
     pub const MORTON_BELOW_RAYS_PER_TRIANGLE: u64 = 4;
 
     /// The build for a tree that will answer about `rays` rays over
