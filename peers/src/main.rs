@@ -287,29 +287,12 @@ fn rays(scene: &Path, subdivide: u32, repeats: usize) -> Result<()> {
     let accel = Accel::new(&tri, AccelOptions::default());
     let (_, blocks) = camera_rays(&tri.camera);
     let primary: usize = blocks.iter().map(Vec::len).sum();
-    let hits = || -> usize {
-        let mut out = [None; 8];
-        blocks
-            .iter()
-            .map(|b| {
-                let out = &mut out[..b.len()];
-                accel.intersect_packets(b, out);
-                out.iter().filter(|h| h.is_some()).count()
-            })
-            .sum()
-    };
     let queries = shadow_rays(&tri, &accel);
     let vis = ShadowRays::new(&accel);
-    let blocked = || -> usize {
-        queries
-            .chunks(4096)
-            .map(|c| {
-                let mut out = vec![rendiff::color::Rgb::WHITE; c.len()];
-                vis.transmittance_packets(c, &mut out);
-                out.iter().filter(|t| t.is_black()).count()
-            })
-            .sum()
-    };
+    // The rays of the `embree` row's packet and shadow measures, on this
+    // pool's one thread.
+    let hits = || ours_packets(&accel, &blocks);
+    let blocked = || ours_blocked(&vis, &queries);
     let p = pool(1)?;
     let t_primary = time_ms(&p, repeats, &|| {
         std::hint::black_box(hits());
