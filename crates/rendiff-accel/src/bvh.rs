@@ -26,6 +26,7 @@ use pulp::WithSimd;
 use rayon::prelude::*;
 
 use super::SimdPath;
+use super::huge::Big;
 #[cfg(test)]
 use super::triangle::intersect;
 use super::triangle::slab_dir;
@@ -75,7 +76,7 @@ const PACKET_TEST_DEPTH: u32 = 3;
 /// A node of `WIDTH` children, their boxes as structure of arrays (one
 /// 256-bit vector per plane coordinate on x86-64-v3, two SSE vectors on
 /// the baseline).
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
 #[repr(C, align(64))]
 pub(crate) struct Node {
     min_x: [f32; WIDTH],
@@ -90,20 +91,23 @@ pub(crate) struct Node {
     /// pass the slab test for a ray with positive direction components
     /// and no far bound.
     used: u32,
+    /// (Plain old data for `huge::Big`: the node's 256 bytes without
+    /// implicit padding.)
+    pad: [u32; 7],
 }
 
 /// The BVH: nodes and triangle data in leaf order.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct Bvh {
-    nodes: Vec<Node>,
+    nodes: Big<Node>,
     /// The root: an inner node index or a leaf encoding.
     root: u32,
     root_count: u32,
     /// The triangles in leaf order, four to a pack; a leaf is a run of
     /// packs.
-    packs: Vec<TriPack>,
+    packs: Big<TriPack>,
     /// Triangle id (in the `TriScene`) of each lane: `ids[4·pack + lane]`.
-    ids: Vec<u32>,
+    ids: Big<u32>,
     /// Triangles.
     triangles: usize,
     bounds: Aabb,
@@ -147,7 +151,8 @@ pub struct BvhHit {
 /// reference index kept in the `w` lane of `lo` (32 bytes, moved in place
 /// by the partitions, so the build streams through memory), as the bits
 /// of a normal float (see [`INDEX_BIAS`]).
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+#[repr(C)]
 struct PrimRef {
     lo: Vec4,
     hi: Vec4,
@@ -1237,7 +1242,7 @@ fn emit_into<F: Fn(u32) -> [Vec3; 3]>(
         lanes.copy_from_slice(&i);
     }
     if let Some(p) = packs.last_mut() {
-        p.last = true;
+        p.last = 1;
     }
 }
 
@@ -1256,21 +1261,11 @@ fn pack_of<F: Fn(u32) -> [Vec3; 3]>(chunk: &[u32], tri: &F) -> (TriPack, [u32; 4
             v[corner][2][lane] = p.z;
         }
     }
-    let pack = TriPack {
-        v: v.map(|c| c.map(Vec4::from_array)),
-        lanes: u32::try_from(chunk.len()).unwrap_or(4),
-        last: false,
-    };
+    let pack = TriPack::new(
+        v.map(|c| c.map(Vec4::from_array)),
+        u32::try_from(chunk.len()).unwrap_or(4),
+    );
     (pack, ids)
-}
-
-/// `n` copies of `value`, written in parallel (the pages first touched
-/// by the threads that fill them). (`frame::filled` does the same for the
-/// frame's buffers; `accel` sits below `frame`, so it keeps its own.)
-fn filled<T: Copy + Send + Sync>(n: usize, value: T) -> Vec<T> {
-    let mut v = Vec::with_capacity(n);
-    v.par_extend(rayon::iter::repeat_n(value, n));
-    v
 }
 
 impl Bvh {
@@ -1288,13 +1283,10 @@ impl Bvh {
         // (Every pass over all the triangles runs in parallel: rayon's
         // indexed collects and min/max reductions give the same array and
         // bounds at every thread count.)
-        let mut prims: Vec<PrimRef> = if tree == Tree::Morton {
-            Vec::new()
+        let mut prims: Big<PrimRef> = if tree == Tree::Morton {
+            Big::default()
         } else {
-            ids.par_iter()
-                .enumerate()
-                .map(|(k, &id)| prim_ref(k, tri(id)))
-                .collect()
+            Big::from_fn(ids.len(), |k| prim_ref(k, tri(ids[k])))
         };
         // The triangle ids in leaf order: the primitives' own order after
         // the SAH's partitions, the sorted keys' for Morton order.
@@ -1335,9 +1327,9 @@ impl Bvh {
         // doublings were a third of the Morton build), and filled in
         // parallel.
         let Tally { nodes, packs } = tree.tally();
-        bvh.nodes = filled(nodes, empty_node());
-        bvh.packs = filled(packs, TriPack::EMPTY);
-        bvh.ids = filled(4 * packs, u32::MAX);
+        bvh.nodes = Big::filled(nodes, empty_node());
+        bvh.packs = Big::filled(packs, TriPack::EMPTY);
+        bvh.ids = Big::filled(4 * packs, u32::MAX);
         match &tree {
             BNode::Leaf { start, count, .. } => {
                 let order = &leaves.order[*start..start + count];
@@ -1377,7 +1369,7 @@ impl Bvh {
             self.packs.push(pack);
         }
         if let Some(p) = self.packs.last_mut() {
-            p.last = true;
+            p.last = 1;
         }
         first
     }
@@ -1535,7 +1527,7 @@ impl Bvh {
                     }
                 }
             }
-            if pack.last {
+            if pack.ends_leaf() {
                 return false;
             }
             p += 1;
@@ -1612,7 +1604,7 @@ impl Bvh {
                     }
                 }
             }
-            if pack.last || stopped == [true; 2] {
+            if pack.ends_leaf() || stopped == [true; 2] {
                 return stopped;
             }
             p += 1;
@@ -2249,7 +2241,7 @@ impl ClosestLeaf<'_> {
                     }
                 }
             }
-            if pack.last {
+            if pack.ends_leaf() {
                 return;
             }
             p += 1;
@@ -2754,6 +2746,7 @@ fn empty_node() -> Node {
         max_z: inf,
         child: [EMPTY; WIDTH],
         used: 0,
+        pad: [0; 7],
     }
 }
 
@@ -3018,7 +3011,7 @@ mod tests {
                 }
             }
             out.push(p.lanes);
-            out.push(u32::from(p.last));
+            out.push(p.last);
         }
         out.extend_from_slice(&bvh.ids);
         out
@@ -3121,7 +3114,7 @@ mod tests {
                 for lane in 0..pack.lanes as usize {
                     out.push(bvh.ids[4 * p + lane]);
                 }
-                if pack.last {
+                if pack.ends_leaf() {
                     return out;
                 }
                 p += 1;

@@ -9,6 +9,7 @@
 #![warn(missing_docs, missing_debug_implementations)]
 
 mod bvh;
+mod huge;
 mod light_buffer;
 mod triangle;
 

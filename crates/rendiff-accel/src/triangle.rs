@@ -258,15 +258,20 @@ impl RayPrecomp {
 /// Four triangles as structure of arrays: `v[corner][axis]` holds that
 /// coordinate of the four triangles, one per lane. Leaves of the BVH are
 /// runs of packs; `lanes` says how many lanes are triangles and `last`
-/// whether the leaf ends here.
-#[derive(Clone, Copy, Debug)]
+/// whether the leaf ends here. Plain old data (no padding, every bit
+/// pattern a value), so that the build's pack array can live in memory
+/// advised for huge pages (`huge::Big`).
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+#[repr(C)]
 pub(crate) struct TriPack {
     /// Corner coordinates, `v[corner][axis]`, a triangle per lane.
     pub v: [[Vec4; 3]; 3],
     /// Lanes in use (1 … 4).
     pub lanes: u32,
-    /// The last pack of its leaf.
-    pub last: bool,
+    /// 1 for the last pack of its leaf, else 0 (see [`TriPack::ends_leaf`]).
+    pub last: u32,
+    /// (The pack's size is a multiple of its vectors' 16 bytes.)
+    pad: [u32; 2],
 }
 
 impl TriPack {
@@ -275,8 +280,25 @@ impl TriPack {
     pub(crate) const EMPTY: TriPack = TriPack {
         v: [[Vec4::ZERO; 3]; 3],
         lanes: 0,
-        last: true,
+        last: 1,
+        pad: [0; 2],
     };
+
+    /// A pack of `lanes` triangles, not the last of its leaf.
+    pub(crate) fn new(v: [[Vec4; 3]; 3], lanes: u32) -> TriPack {
+        TriPack {
+            v,
+            lanes,
+            last: 0,
+            pad: [0; 2],
+        }
+    }
+
+    /// The last pack of its leaf.
+    #[inline(always)]
+    pub(crate) fn ends_leaf(&self) -> bool {
+        self.last != 0
+    }
 
     /// Puts a triangle in `lane`.
     #[cfg(test)]

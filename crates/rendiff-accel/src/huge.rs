@@ -1,0 +1,195 @@
+//! Large arrays of plain values in memory advised for transparent huge
+//! pages.
+//!
+//! A BVH build writes every byte of its large arrays once (the boxes it
+//! partitions, the nodes, the triangle packs and their ids: about 56 MB
+//! for the 940 k-triangle bunny), and each first touch of a 4 KB page is
+//! a page fault, about 2 µs apiece on the virtual machines measured: some
+//! 14 000 of them, 8 % of the build. Embree asks the kernel to back its
+//! allocations with 2 MB pages (`madvise(MADV_HUGEPAGE)`, seen under
+//! `strace`); so does [`Big`], for arrays of at least [`MAPPED_BYTES`], by
+//! an anonymous map ([`memmap2`], the crate ripgrep reads files with)
+//! advised before anything touches it and seen as a slice of `T` through
+//! [`bytemuck`] (so `T` is plain old data: no padding, every bit pattern a
+//! value). The advice is only advice: where the kernel gives no huge
+//! pages (THP off, or another system) the map is ordinary memory, and a
+//! map that cannot be made at all falls back to a `Vec`. Smaller arrays
+//! are `Vec`s. ARCHITECTURE.md, "Huge pages for the build's arrays", has
+//! the measurements.
+
+use bytemuck::Pod;
+use memmap2::MmapMut;
+use rayon::prelude::*;
+
+/// Arrays of at least this many bytes are mapped: a map is a system call
+/// and a kernel object, worth it from two huge pages up.
+pub(crate) const MAPPED_BYTES: usize = 4 << 20;
+
+/// An array of `T`, mapped and advised for huge pages when large (see the
+/// module's documentation), else a `Vec`. It derefs to `[T]`.
+pub(crate) struct Big<T: Pod> {
+    /// The values, unless `map` holds them.
+    heap: Vec<T>,
+    /// The map and the number of `T` it holds.
+    map: Option<(MmapMut, usize)>,
+}
+
+impl<T: Pod> Default for Big<T> {
+    fn default() -> Self {
+        Big {
+            heap: Vec::new(),
+            map: None,
+        }
+    }
+}
+
+impl<T: Pod + std::fmt::Debug> std::fmt::Debug for Big<T> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_list().entries(self.iter()).finish()
+    }
+}
+
+impl<T: Pod> Clone for Big<T> {
+    fn clone(&self) -> Self {
+        let mut c = Big::zeroed(self.len());
+        c.copy_from_slice(self);
+        c
+    }
+}
+
+impl<T: Pod> Big<T> {
+    /// `n` values with every byte zero (untouched memory where mapped).
+    fn zeroed(n: usize) -> Big<T> {
+        let bytes = n.saturating_mul(size_of::<T>());
+        if bytes >= MAPPED_BYTES
+            && let Some(map) = advised_map(bytes)
+        {
+            return Big {
+                heap: Vec::new(),
+                map: Some((map, n)),
+            };
+        }
+        Big {
+            heap: vec![T::zeroed(); n],
+            map: None,
+        }
+    }
+
+    /// `n` copies of `value`, written in parallel (each page first
+    /// touched by the thread that fills it). (`frame::filled` does the
+    /// same for the frame's buffers.)
+    pub(crate) fn filled(n: usize, value: T) -> Big<T>
+    where
+        T: Send + Sync,
+    {
+        Big::from_fn(n, |_| value)
+    }
+
+    /// The values `f(0), …, f(n − 1)`, formed in parallel.
+    pub(crate) fn from_fn(n: usize, f: impl Fn(usize) -> T + Sync) -> Big<T>
+    where
+        T: Send + Sync,
+    {
+        let mut b = Big::zeroed(n);
+        b.par_iter_mut().enumerate().for_each(|(k, x)| *x = f(k));
+        b
+    }
+
+    /// Appends `values` (a mapped array becomes a `Vec` first: only the
+    /// light buffer's leaves grow this way, and they start empty).
+    pub(crate) fn extend_from_slice(&mut self, values: &[T]) {
+        self.heap().extend_from_slice(values);
+    }
+
+    /// Appends one value (as [`Big::extend_from_slice`]).
+    pub(crate) fn push(&mut self, value: T) {
+        self.heap().push(value);
+    }
+
+    /// The values as a growable `Vec`, converting a map into one.
+    fn heap(&mut self) -> &mut Vec<T> {
+        if let Some((m, n)) = self.map.take() {
+            self.heap = values(&m, n).to_vec();
+        }
+        &mut self.heap
+    }
+}
+
+/// An anonymous map of `bytes`, advised for transparent huge pages;
+/// `None` when the system makes no map.
+fn advised_map(bytes: usize) -> Option<MmapMut> {
+    let map = MmapMut::map_anon(bytes).ok()?;
+    // Only advice: without huge pages the map is ordinary memory.
+    #[cfg(target_os = "linux")]
+    let _ = map.advise(memmap2::Advice::HugePage);
+    Some(map)
+}
+
+impl<T: Pod> std::ops::Deref for Big<T> {
+    type Target = [T];
+
+    fn deref(&self) -> &[T] {
+        match &self.map {
+            Some((m, n)) => values(m, *n),
+            None => &self.heap,
+        }
+    }
+}
+
+impl<T: Pod> std::ops::DerefMut for Big<T> {
+    fn deref_mut(&mut self) -> &mut [T] {
+        match &mut self.map {
+            Some((m, n)) => bytemuck::cast_slice_mut(&mut m[..*n * size_of::<T>()]),
+            None => &mut self.heap,
+        }
+    }
+}
+
+impl<'a, T: Pod> IntoIterator for &'a Big<T> {
+    type Item = &'a T;
+    type IntoIter = std::slice::Iter<'a, T>;
+
+    fn into_iter(self) -> Self::IntoIter {
+        self.iter()
+    }
+}
+
+/// The `n` values a map holds. A map starts on a page boundary (aligned
+/// for every `T` stored here: the largest alignment is a node's 64 bytes)
+/// and holds exactly `n` values' bytes, so the cast cannot fail.
+fn values<T: Pod>(m: &MmapMut, n: usize) -> &[T] {
+    bytemuck::cast_slice(&m[..n * size_of::<T>()])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Both forms hold the values they were given, grow, and clone.
+    #[test]
+    fn mapped_and_heap_arrays_hold_their_values() {
+        for n in [0, 3, MAPPED_BYTES / 4 + 5] {
+            let mut b = Big::<u32>::from_fn(n, |k| u32::try_from(k).unwrap_or(0) * 3);
+            assert_eq!(
+                b.map.is_some(),
+                n * 4 >= MAPPED_BYTES,
+                "{n}: mapped exactly when large"
+            );
+            assert_eq!(b.len(), n);
+            assert!(
+                b.iter()
+                    .enumerate()
+                    .all(|(k, &x)| x == u32::try_from(k).unwrap_or(0) * 3)
+            );
+            let c = b.clone();
+            assert_eq!(&*c, &*b);
+            b.push(7);
+            b.extend_from_slice(&[8, 9]);
+            assert_eq!(b.len(), n + 3);
+            assert_eq!(&b[n..], &[7, 8, 9]);
+            assert_eq!(&b[..n], &*c, "growing keeps the values");
+        }
+        let f = Big::filled(MAPPED_BYTES, 5u8);
+        assert!(f.iter().all(|&x| x == 5));
+    }
+}
