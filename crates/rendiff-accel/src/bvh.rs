@@ -770,12 +770,12 @@ fn spread3(x: u32) -> u32 {
 /// half is the primitive's index, so equal codes keep index order and the
 /// order is the same on every run): three passes of a least significant
 /// digit radix sort, ten bits each.
-fn radix_sort_codes(keys: &mut Vec<u64>) {
+fn radix_sort_codes(keys: &mut Big<u64>) {
     if keys.len() > SORT_RUN && rayon::current_num_threads() >= 4 {
         par_sort_codes(keys);
         return;
     }
-    let mut tmp = vec![0u64; keys.len()];
+    let mut tmp = Big::zeroed(keys.len());
     for pass in 0..3 {
         let shift = 32 + 10 * pass;
         let mut count = [0usize; 1025];
@@ -803,7 +803,7 @@ const SORT_RUN: usize = 1 << 16;
 /// ten code bits (a counting sort); each of the 1 024 digits then gathers
 /// its keys from run after run into its own part of the output and sorts
 /// them there.
-fn par_sort_codes(keys: &mut Vec<u64>) {
+fn par_sort_codes(keys: &mut [u64]) {
     const DIGITS: usize = 1024;
     let digit = |k: u64| ((k >> 52) & 1023) as usize;
     let runs: Vec<(Vec<u64>, Vec<usize>)> = keys
@@ -827,7 +827,7 @@ fn par_sort_codes(keys: &mut Vec<u64>) {
         })
         .collect();
     let mut parts: Vec<&mut [u64]> = Vec::with_capacity(DIGITS);
-    let mut rest = keys.as_mut_slice();
+    let mut rest = keys;
     for d in 0..DIGITS {
         let n: usize = runs.iter().map(|(_, s)| s[d + 1] - s[d]).sum();
         parts.push(take_front(&mut rest, n));
@@ -893,7 +893,7 @@ fn gather(node: &BNode) -> ([&BNode; WIDTH], usize) {
 /// vertices where needed (its centroid for its code, then the leaves'
 /// bounds), which at ten million triangles spares 327 MB of memory that
 /// this machine's page faults made the slowest part of the build.
-fn build_morton<F: Fn(u32) -> [Vec3; 3] + Sync>(ids: &[u32], tri: &F) -> (BNode, Vec<u64>) {
+fn build_morton<F: Fn(u32) -> [Vec3; 3] + Sync>(ids: &[u32], tri: &F) -> (BNode, Big<u64>) {
     let boxes = TriBoxes { ids, tri };
     let (_, cbounds) = par_bounds(ids.len(), |k| boxes.get(k));
     let extent = cbounds.hi - cbounds.lo;
@@ -918,19 +918,16 @@ fn build_morton<F: Fn(u32) -> [Vec3; 3] + Sync>(ids: &[u32], tri: &F) -> (BNode,
         0.0,
     );
     let n_cells = 1usize << MORTON_BITS;
-    let mut keys: Vec<u64> = (0..ids.len())
-        .into_par_iter()
-        .map(|k| {
-            let p = boxes.get(k);
-            // (Clamped again: a centroid whose doubled sum overflowed is a
-            // NaN or an infinity here, and any cell is as right for it,
-            // since the boxes, not the codes, bound the tree.)
-            let cell = |b: usize| u32::try_from(b.min(n_cells - 1)).unwrap_or(0);
-            let [x, y, z] = bins_of(p.centroid2(), cbounds.lo, scale, n_cells).map(cell);
-            let code = (spread3(x) << 2) | (spread3(y) << 1) | spread3(z);
-            (u64::from(code) << 32) | k as u64
-        })
-        .collect();
+    let mut keys = Big::from_fn(ids.len(), |k| {
+        let p = boxes.get(k);
+        // (Clamped again: a centroid whose doubled sum overflowed is a
+        // NaN or an infinity here, and any cell is as right for it,
+        // since the boxes, not the codes, bound the tree.)
+        let cell = |b: usize| u32::try_from(b.min(n_cells - 1)).unwrap_or(0);
+        let [x, y, z] = bins_of(p.centroid2(), cbounds.lo, scale, n_cells).map(cell);
+        let code = (spread3(x) << 2) | (spread3(y) << 1) | spread3(z);
+        (u64::from(code) << 32) | k as u64
+    });
     radix_sort_codes(&mut keys);
     // The sorted keys carry the triangles' indices; only the leaves read
     // their boxes.
@@ -1311,9 +1308,9 @@ impl Bvh {
         let (c, r) = bvh.bounds.bounding_sphere();
         bvh.sphere = (to_f64(c), f64::from(r) * (1.0 + 1e-6));
         bvh.triangles = ids.len();
-        let order: Vec<u32> = match &morton_keys {
-            Some(keys) => keys.par_iter().map(|&k| ids[key_index(k)]).collect(),
-            None => prims.par_iter().map(|p| ids[p.index() as usize]).collect(),
+        let order: Big<u32> = match &morton_keys {
+            Some(keys) => Big::from_fn(ids.len(), |k| ids[key_index(keys[k])]),
+            None => Big::from_fn(ids.len(), |k| ids[prims[k].index() as usize]),
         };
         drop(morton_keys);
         drop(prims);
@@ -3205,7 +3202,7 @@ mod tests {
     #[test]
     fn radix_sort_orders_codes_then_indices() {
         let mut z = 0x2545_f491_4f6c_dd1du64;
-        let mut keys: Vec<u64> = (0..5000u64)
+        let keys: Vec<u64> = (0..5000u64)
             .map(|k| {
                 z ^= z << 13;
                 z ^= z >> 7;
@@ -3217,8 +3214,9 @@ mod tests {
             .collect();
         let mut want = keys.clone();
         want.sort_unstable();
-        radix_sort_codes(&mut keys);
-        assert_eq!(keys, want);
+        let mut sorted = Big::from_fn(keys.len(), |k| keys[k]);
+        radix_sort_codes(&mut sorted);
+        assert_eq!(&*sorted, &want[..]);
         // The parallel sort (four threads or more, more than one run):
         // 300 000 keys, codes over all 30 bits, some repeated.
         let mut keys: Vec<u64> = (0..300_000u64)
@@ -3230,14 +3228,20 @@ mod tests {
                 (code << 32) | k
             })
             .collect();
-        let mut want = keys.clone();
-        want.sort_unstable();
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(4)
-            .build()
-            .unwrap();
-        pool.install(|| radix_sort_codes(&mut keys));
-        assert!(keys == want, "the parallel sort orders as the serial one");
+        keys.sort_unstable();
+        // (2.4 MB of keys: the serial sort's arrays are mapped ones.)
+        for threads in [1, 4] {
+            let mut sorted = Big::from_fn(keys.len(), |k| keys[k]);
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| radix_sort_codes(&mut sorted));
+            assert!(
+                *sorted == keys[..],
+                "{threads} threads: the sort orders as a comparison sort"
+            );
+        }
         assert_eq!(spread3(0b11_1111_1111), 0x0924_9249);
         assert_eq!(spread3(0b10_0000_0001), (1 << 27) | 1);
     }

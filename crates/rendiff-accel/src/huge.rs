@@ -21,17 +21,24 @@ use bytemuck::Pod;
 use memmap2::MmapMut;
 use rayon::prelude::*;
 
-/// Arrays of at least this many bytes are mapped: a map is a system call
-/// and a kernel object, worth it from two huge pages up.
-pub(crate) const MAPPED_BYTES: usize = 4 << 20;
+/// The size of a transparent huge page on x86-64 (and the alignment a
+/// map's array starts at, so that its huge pages cover it from its first
+/// byte).
+const HUGE_PAGE: usize = 2 << 20;
+
+/// Arrays of at least this many bytes are mapped: a map is three system
+/// calls (map, advise, unmap) and a kernel object, about what 10 page
+/// faults cost, against the 512 faults of every huge page it spares.
+pub(crate) const MAPPED_BYTES: usize = HUGE_PAGE;
 
 /// An array of `T`, mapped and advised for huge pages when large (see the
 /// module's documentation), else a `Vec`. It derefs to `[T]`.
 pub(crate) struct Big<T: Pod> {
     /// The values, unless `map` holds them.
     heap: Vec<T>,
-    /// The map and the number of `T` it holds.
-    map: Option<(MmapMut, usize)>,
+    /// The map, the offset of the array in it (where a huge page starts)
+    /// and the number of `T` it holds.
+    map: Option<(MmapMut, usize, usize)>,
 }
 
 impl<T: Pod> Default for Big<T> {
@@ -58,15 +65,17 @@ impl<T: Pod> Clone for Big<T> {
 }
 
 impl<T: Pod> Big<T> {
-    /// `n` values with every byte zero (untouched memory where mapped).
-    fn zeroed(n: usize) -> Big<T> {
+    /// `n` values with every byte zero (untouched memory where mapped,
+    /// and where not, memory the allocator gets zeroed from the system
+    /// where it can: nothing is written until the caller writes).
+    pub(crate) fn zeroed(n: usize) -> Big<T> {
         let bytes = n.saturating_mul(size_of::<T>());
         if bytes >= MAPPED_BYTES
-            && let Some(map) = advised_map(bytes)
+            && let Some((map, at)) = advised_map(bytes)
         {
             return Big {
                 heap: Vec::new(),
-                map: Some((map, n)),
+                map: Some((map, at, n)),
             };
         }
         Big {
@@ -108,21 +117,24 @@ impl<T: Pod> Big<T> {
 
     /// The values as a growable `Vec`, converting a map into one.
     fn heap(&mut self) -> &mut Vec<T> {
-        if let Some((m, n)) = self.map.take() {
-            self.heap = values(&m, n).to_vec();
+        if let Some((m, at, n)) = self.map.take() {
+            self.heap = values(&m, at, n).to_vec();
         }
         &mut self.heap
     }
 }
 
-/// An anonymous map of `bytes`, advised for transparent huge pages;
-/// `None` when the system makes no map.
-fn advised_map(bytes: usize) -> Option<MmapMut> {
-    let map = MmapMut::map_anon(bytes).ok()?;
+/// An anonymous map with room for `bytes` from an offset where a huge
+/// page starts, advised for transparent huge pages, and that offset;
+/// `None` when the system makes no map. (The extra huge page of address
+/// space is never touched, so it costs no memory.)
+fn advised_map(bytes: usize) -> Option<(MmapMut, usize)> {
+    let map = MmapMut::map_anon(bytes.checked_add(HUGE_PAGE)?).ok()?;
+    let at = (HUGE_PAGE - map.as_ptr().addr() % HUGE_PAGE) % HUGE_PAGE;
     // Only advice: without huge pages the map is ordinary memory.
     #[cfg(target_os = "linux")]
     let _ = map.advise(memmap2::Advice::HugePage);
-    Some(map)
+    Some((map, at))
 }
 
 impl<T: Pod> std::ops::Deref for Big<T> {
@@ -130,7 +142,7 @@ impl<T: Pod> std::ops::Deref for Big<T> {
 
     fn deref(&self) -> &[T] {
         match &self.map {
-            Some((m, n)) => values(m, *n),
+            Some((m, at, n)) => values(m, *at, *n),
             None => &self.heap,
         }
     }
@@ -139,7 +151,7 @@ impl<T: Pod> std::ops::Deref for Big<T> {
 impl<T: Pod> std::ops::DerefMut for Big<T> {
     fn deref_mut(&mut self) -> &mut [T] {
         match &mut self.map {
-            Some((m, n)) => bytemuck::cast_slice_mut(&mut m[..*n * size_of::<T>()]),
+            Some((m, at, n)) => bytemuck::cast_slice_mut(&mut m[*at..*at + *n * size_of::<T>()]),
             None => &mut self.heap,
         }
     }
@@ -154,11 +166,12 @@ impl<'a, T: Pod> IntoIterator for &'a Big<T> {
     }
 }
 
-/// The `n` values a map holds. A map starts on a page boundary (aligned
-/// for every `T` stored here: the largest alignment is a node's 64 bytes)
-/// and holds exactly `n` values' bytes, so the cast cannot fail.
-fn values<T: Pod>(m: &MmapMut, n: usize) -> &[T] {
-    bytemuck::cast_slice(&m[..n * size_of::<T>()])
+/// The `n` values a map holds from byte `at`. The array starts on a huge
+/// page's boundary (aligned for every `T` stored here: the largest
+/// alignment is a node's 64 bytes) and spans exactly `n` values' bytes,
+/// so the cast cannot fail.
+fn values<T: Pod>(m: &MmapMut, at: usize, n: usize) -> &[T] {
+    bytemuck::cast_slice(&m[at..at + n * size_of::<T>()])
 }
 
 #[cfg(test)]
@@ -176,6 +189,13 @@ mod tests {
                 "{n}: mapped exactly when large"
             );
             assert_eq!(b.len(), n);
+            if b.map.is_some() {
+                assert_eq!(
+                    b.as_ptr().addr() % HUGE_PAGE,
+                    0,
+                    "{n}: a mapped array starts where a huge page does"
+                );
+            }
             assert!(
                 b.iter()
                     .enumerate()
