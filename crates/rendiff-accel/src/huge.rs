@@ -7,23 +7,27 @@
 //! a page fault, about 2 µs apiece on the virtual machines measured: some
 //! 14 000 of them, 8 % of the build. Embree asks the kernel to back its
 //! allocations with 2 MB pages (`madvise(MADV_HUGEPAGE)`, seen under
-//! `strace`); so does [`Big`], for arrays of at least [`MAPPED_BYTES`], by
-//! an anonymous map ([`memmap2`], the crate ripgrep reads files with)
-//! advised before anything touches it and seen as a slice of `T` through
-//! [`bytemuck`] (so `T` is plain old data: no padding, every bit pattern a
-//! value). The advice is only advice: where the kernel gives no huge
-//! pages (THP off, or another system) the map is ordinary memory, and a
-//! map that cannot be made at all falls back to a `Vec`. Smaller arrays
-//! are `Vec`s. ARCHITECTURE.md, "Huge pages for the build's arrays", has
-//! the measurements.
+//! `strace`); so does [`Big`] on Linux, for arrays of at least
+//! [`MAPPED_BYTES`], by an anonymous map ([`memmap2`], the crate ripgrep
+//! reads files with) advised before anything touches it and seen as a
+//! slice of `T` through [`bytemuck`] (so `T` is plain old data: no
+//! padding, every bit pattern a value). The advice is only advice: where
+//! the kernel gives no huge pages (THP off) the map is ordinary memory,
+//! and a map that cannot be made falls back to a `Vec`; smaller arrays,
+//! and every array on other systems, are `Vec`s. Each access through a
+//! `Big` checks its form and casts the map's bytes, so a walk takes the
+//! slices once ([`Big`] derefs to `[T]`). ARCHITECTURE.md, "Huge pages for
+//! the build's arrays", has the measurements.
 
 use bytemuck::Pod;
 use memmap2::MmapMut;
 use rayon::prelude::*;
 
-/// The size of a transparent huge page on x86-64 (and the alignment a
-/// map's array starts at, so that its huge pages cover it from its first
-/// byte).
+/// The size of a transparent huge page on x86-64 and on aarch64 with 4 KB
+/// pages (and the alignment a map's array starts at, so that its huge
+/// pages cover it from its first byte). Where the kernel's huge pages are
+/// larger (aarch64 with 64 KB pages: 512 MB) the alignment is wasted and
+/// arrays below that size get no huge page: correct, without the gain.
 const HUGE_PAGE: usize = 2 << 20;
 
 /// Arrays of at least this many bytes are mapped: a map is three system
@@ -58,35 +62,33 @@ impl<T: Pod + std::fmt::Debug> std::fmt::Debug for Big<T> {
 
 impl<T: Pod> Clone for Big<T> {
     fn clone(&self) -> Self {
-        let mut c = Big::zeroed(self.len());
-        c.copy_from_slice(self);
-        c
+        match mapped(self.len()) {
+            Some(mut c) => {
+                c.copy_from_slice(self);
+                c
+            }
+            None => Big {
+                heap: self.to_vec(),
+                map: None,
+            },
+        }
     }
 }
 
 impl<T: Pod> Big<T> {
-    /// `n` values with every byte zero (untouched memory where mapped,
-    /// and where not, memory the allocator gets zeroed from the system
-    /// where it can: nothing is written until the caller writes).
+    /// `n` values with every byte zero: untouched memory where mapped;
+    /// else a `Vec` (for `u64` and other primitives, memory the allocator
+    /// gets zeroed from the system; a struct's zeros are written).
     pub(crate) fn zeroed(n: usize) -> Big<T> {
-        let bytes = n.saturating_mul(size_of::<T>());
-        if bytes >= MAPPED_BYTES
-            && let Some((map, at)) = advised_map(bytes)
-        {
-            return Big {
-                heap: Vec::new(),
-                map: Some((map, at, n)),
-            };
-        }
-        Big {
+        mapped(n).unwrap_or_else(|| Big {
             heap: vec![T::zeroed(); n],
             map: None,
-        }
+        })
     }
 
     /// `n` copies of `value`, written in parallel (each page first
-    /// touched by the thread that fills it). (`frame::filled` does the
-    /// same for the frame's buffers.)
+    /// touched by the thread that fills it, as `frame::filled` does for
+    /// the frame's buffers).
     pub(crate) fn filled(n: usize, value: T) -> Big<T>
     where
         T: Send + Sync,
@@ -94,14 +96,22 @@ impl<T: Pod> Big<T> {
         Big::from_fn(n, |_| value)
     }
 
-    /// The values `f(0), …, f(n − 1)`, formed in parallel.
+    /// The values `f(0), …, f(n − 1)`, formed in parallel and written
+    /// once.
     pub(crate) fn from_fn(n: usize, f: impl Fn(usize) -> T + Sync) -> Big<T>
     where
         T: Send + Sync,
     {
-        let mut b = Big::zeroed(n);
-        b.par_iter_mut().enumerate().for_each(|(k, x)| *x = f(k));
-        b
+        match mapped(n) {
+            Some(mut b) => {
+                b.par_iter_mut().enumerate().for_each(|(k, x)| *x = f(k));
+                b
+            }
+            None => Big {
+                heap: (0..n).into_par_iter().map(&f).collect(),
+                map: None,
+            },
+        }
     }
 
     /// Appends `values` (a mapped array becomes a `Vec` first: only the
@@ -124,10 +134,29 @@ impl<T: Pod> Big<T> {
     }
 }
 
+/// `n` values with every byte zero in a map advised for huge pages, where
+/// they fill at least [`MAPPED_BYTES`] and the system makes the map; on
+/// Linux only (the one system `memmap2` advises huge pages on: elsewhere a
+/// map would cost its system calls and give nothing).
+fn mapped<T: Pod>(n: usize) -> Option<Big<T>> {
+    let bytes = n.checked_mul(size_of::<T>())?;
+    if bytes < MAPPED_BYTES || !cfg!(target_os = "linux") {
+        return None;
+    }
+    let (map, at) = advised_map(bytes)?;
+    Some(Big {
+        heap: Vec::new(),
+        map: Some((map, at, n)),
+    })
+}
+
 /// An anonymous map with room for `bytes` from an offset where a huge
 /// page starts, advised for transparent huge pages, and that offset;
-/// `None` when the system makes no map. (The extra huge page of address
-/// space is never touched, so it costs no memory.)
+/// `None` when the system makes no map. (The address space before the
+/// array is never touched and costs no memory; the huge page that holds
+/// the array's end may lie wholly inside the map, and then the kernel can
+/// back all of it: up to 2 MB beyond the array, as for any array of huge
+/// pages.)
 fn advised_map(bytes: usize) -> Option<(MmapMut, usize)> {
     let map = MmapMut::map_anon(bytes.checked_add(HUGE_PAGE)?).ok()?;
     let at = (HUGE_PAGE - map.as_ptr().addr() % HUGE_PAGE) % HUGE_PAGE;
@@ -185,7 +214,7 @@ mod tests {
             let mut b = Big::<u32>::from_fn(n, |k| u32::try_from(k).unwrap_or(0) * 3);
             assert_eq!(
                 b.map.is_some(),
-                n * 4 >= MAPPED_BYTES,
+                n * 4 >= MAPPED_BYTES && cfg!(target_os = "linux"),
                 "{n}: mapped exactly when large"
             );
             assert_eq!(b.len(), n);
