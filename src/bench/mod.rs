@@ -476,7 +476,7 @@ impl Bench {
             label.push_str(" d1");
         }
         let job = Prepared::from_scene(s, &ov)?;
-        Ok((label, job.render(Backend::Ray)?.frame.color))
+        Ok((label, job.render(Backend::Ray)?.frame.color.to_vec()))
     }
 
     /// A stored POV-Ray reference, if it is current and of the right size.

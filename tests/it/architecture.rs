@@ -103,6 +103,7 @@ const ALLOWED: &[(&str, &[&str])] = &[
     ("budget", &[]),
     ("cleanup", &[]),
     ("escape", &[]),
+    ("huge", &[]),
     (
         "texture",
         &["budget", "color", "image_io", "input", "math", "options"],
@@ -112,7 +113,7 @@ const ALLOWED: &[(&str, &[&str])] = &[
     ("camera", &["coverage", "math"]),
     ("polygon", &["math"]),
     ("shade", &["color", "math", "texture"]),
-    ("frame", &["color", "image_io"]),
+    ("frame", &["color", "huge", "image_io"]),
     (
         "scene",
         &[
@@ -138,7 +139,15 @@ const ALLOWED: &[(&str, &[&str])] = &[
     ),
     (
         "accel",
-        &["analytic", "color", "math", "options", "shade", "tri_scene"],
+        &[
+            "analytic",
+            "color",
+            "huge",
+            "math",
+            "options",
+            "shade",
+            "tri_scene",
+        ],
     ),
     ("plan", &["camera", "math", "options", "tri_scene"]),
     ("lines", &["accel", "camera", "math", "tri_scene"]),
@@ -151,6 +160,7 @@ const ALLOWED: &[(&str, &[&str])] = &[
             "color",
             "coverage",
             "frame",
+            "huge",
             "math",
             "options",
             "shade",

@@ -708,8 +708,8 @@ fn frames_in_reused_memory_are_the_fresh_frames() {
             rgb(&f.color),
             rgb(&f.sample_color),
             depth,
-            f.id.clone(),
-            f.flags.clone(),
+            f.id.to_vec(),
+            f.flags.to_vec(),
         ] {
             out.push(u32::try_from(part.len()).unwrap());
             out.extend(part);

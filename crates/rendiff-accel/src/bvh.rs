@@ -26,13 +26,13 @@ use pulp::WithSimd;
 use rayon::prelude::*;
 
 use super::SimdPath;
-use super::huge::Big;
 #[cfg(test)]
 use super::triangle::intersect;
 use super::triangle::slab_dir;
 use super::triangle::{
     RayPrecomp, TriHit, TriPack, WalkRay, candidates, candidates2, intersect_lane,
 };
+use rendiff_core::huge::Big;
 use rendiff_core::math::{Aabb, DVec3, Ray64, Vec3, f32_at_least, gamma, to_f64};
 
 /// Child slot encoding: the high bit marks a leaf.

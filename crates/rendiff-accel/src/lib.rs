@@ -9,7 +9,6 @@
 #![warn(missing_docs, missing_debug_implementations)]
 
 mod bvh;
-mod huge;
 mod light_buffer;
 mod triangle;
 

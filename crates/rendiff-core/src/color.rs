@@ -5,8 +5,11 @@
 
 use std::ops::{Add, AddAssign, Mul, MulAssign, Sub};
 
-/// A linear RGB colour (not clamped; lights may exceed 1).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+/// A linear RGB colour (not clamped; lights may exceed 1). Plain old
+/// data (three `f32`s, no padding), so a frame's colours can live in
+/// memory mapped for huge pages (the frame's buffers).
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+#[repr(C)]
 pub struct Rgb {
     /// Red.
     pub r: f32,

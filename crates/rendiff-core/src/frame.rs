@@ -7,6 +7,7 @@ use std::path::Path;
 use rayon::prelude::*;
 
 use crate::color::Rgb;
+use crate::huge::Big;
 use crate::image_io::{self, ImageIoError, PngEncoding};
 
 /// Triangle id of a sample that sees the background.
@@ -31,16 +32,16 @@ pub struct Frame {
     /// Samples per pixel side.
     pub samples: u32,
     /// Pixel colours (the plain mean of their samples), linear.
-    pub color: Vec<Rgb>,
+    pub color: Big<Rgb>,
     /// Sample colours, linear (empty with one sample per pixel: read them
     /// with [`Frame::sample_colors`]).
-    pub sample_color: Vec<Rgb>,
+    pub sample_color: Big<Rgb>,
     /// Depth per sample: t along the unit primary ray; +∞ for background.
-    pub depth: Vec<f32>,
+    pub depth: Big<f32>,
     /// Visible primitive per sample ([`BACKGROUND`] for none).
-    pub id: Vec<u32>,
+    pub id: Big<u32>,
     /// Shading flags per sample (bit 0: discontinuity; bits 1–31: shadows of lights 0–30).
-    pub flags: Vec<u32>,
+    pub flags: Big<u32>,
 }
 
 /// What a backend found at one sample, as the frame stores it.
@@ -168,15 +169,15 @@ impl Frame {
             width,
             height,
             samples,
-            color: filled(n, background),
+            color: Big::filled(n, background),
             sample_color: if samples == 1 {
-                Vec::new()
+                Big::default()
             } else {
-                filled(ns, background)
+                Big::filled(ns, background)
             },
-            depth: filled(ns, f32::INFINITY),
-            id: filled(ns, BACKGROUND),
-            flags: vec![0; ns],
+            depth: Big::filled(ns, f32::INFINITY),
+            id: Big::filled(ns, BACKGROUND),
+            flags: Big::zeroed(ns),
         }
     }
 
@@ -191,15 +192,12 @@ impl Frame {
         self.width = width;
         self.height = height;
         self.samples = samples;
-        refill(&mut self.color, n, background);
-        refill(
-            &mut self.sample_color,
-            if samples == 1 { 0 } else { ns },
-            background,
-        );
-        refill(&mut self.depth, ns, f32::INFINITY);
-        refill(&mut self.id, ns, BACKGROUND);
-        refill(&mut self.flags, ns, 0);
+        self.color.refill(n, background);
+        self.sample_color
+            .refill(if samples == 1 { 0 } else { ns }, background);
+        self.depth.refill(ns, f32::INFINITY);
+        self.id.refill(ns, BACKGROUND);
+        self.flags.refill(ns, 0);
     }
 
     /// Width of the sample grid.
@@ -314,33 +312,6 @@ impl Frame {
 /// colours (16-bit linear) — the folder `rendiff diff --b DIR` reads as
 /// another renderer's G-buffer.
 pub const GBUFFER_FILES: [&str; 4] = ["depth.pfm", "id.png", "flags.png", "color.png"];
-
-/// `v` made `len` copies of `value`: in its own memory where that is large
-/// enough, else in a new vector. Large buffers are written in parallel
-/// (a new one by the threads that then own its fresh pages).
-pub fn refill<T: Clone + Send + Sync>(v: &mut Vec<T>, len: usize, value: T) {
-    if v.capacity() < len {
-        *v = filled(len, value);
-    } else {
-        v.truncate(len);
-        v.par_iter_mut()
-            .with_min_len(1 << 16)
-            .for_each(|x| *x = value.clone());
-        v.resize(len, value);
-    }
-}
-
-/// `len` copies of `value`, a large vector written in parallel (its
-/// fresh pages first touched by the threads that fill them, a serial
-/// tail of a small frame on many threads otherwise).
-fn filled<T: Clone + Send + Sync>(len: usize, value: T) -> Vec<T> {
-    if len < 1 << 16 {
-        return vec![value; len];
-    }
-    let mut v = Vec::with_capacity(len);
-    v.par_extend(rayon::iter::repeat_n(value, len));
-    v
-}
 
 /// Bands a frame's parallel passes want per thread of the pool: a band is
 /// one task, and with few of them the threads that draw the costly rows

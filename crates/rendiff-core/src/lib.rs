@@ -20,6 +20,7 @@ pub mod color;
 pub mod coverage;
 pub mod escape;
 pub mod frame;
+pub mod huge;
 pub mod image_io;
 pub mod input;
 pub mod math;

@@ -37,7 +37,8 @@ use clip::{HVert, clip_polygon, planes};
 use rendiff_accel::{Accel, AccelOptions, BvhBuild, ShadowBatch, ShadowRays};
 use rendiff_core::camera::{Projection, SampleRays};
 use rendiff_core::coverage::{FillRule, SampleGrid, SnappedTri, Sub8, bbox_samples, doubled_area};
-use rendiff_core::frame::{BACKGROUND, Frame, Sample, band_rows, refill};
+use rendiff_core::frame::{BACKGROUND, Frame, Sample, band_rows};
+use rendiff_core::huge::Big;
 use rendiff_core::math::{DVec3, to_f64};
 use rendiff_core::options::{DepthFormat, ShadowMode};
 use rendiff_core::shade::{self, Unoccluded, Visibility};
@@ -193,9 +194,9 @@ impl Planes {
 #[derive(Clone, Debug)]
 pub struct VisibilityBuffers {
     /// Depth key per sample (smaller is nearer; `u32::MAX` empty).
-    pub key: Vec<u32>,
+    pub key: Big<u32>,
     /// Triangle id per sample ([`BACKGROUND`] empty).
-    pub id: Vec<u32>,
+    pub id: Big<u32>,
     /// Counters.
     pub stats: RasterStats,
 }
@@ -264,8 +265,8 @@ pub fn render(scene: &TriScene, opts: &RasterOptions) -> (Frame, RasterStats) {
 #[derive(Debug, Default)]
 pub struct RasterBuffers {
     projected: Projected,
-    key: Vec<u32>,
-    id: Vec<u32>,
+    key: Big<u32>,
+    id: Big<u32>,
 }
 
 /// Renders a scene into `frame` (made the scene's size), in the memory of
@@ -515,8 +516,8 @@ fn visibility_into(
 
     let total = (sw as usize) * (sh as usize);
     let (key, id) = (&mut buffers.key, &mut buffers.id);
-    refill(key, total, u32::MAX);
-    refill(id, total, BACKGROUND);
+    key.refill(total, u32::MAX);
+    id.refill(total, BACKGROUND);
     let depth_map = DepthMap {
         format: opts.depth,
         perspective,

@@ -579,7 +579,7 @@ fn read_external(job: &Prepared, dir: &Path) -> Result<(Frame, compare::Quantisa
         }
     }
     frame.id = ids.iter().map(|&i| i.wrapping_sub(1)).collect();
-    frame.depth = depth;
+    frame.depth = depth.into();
     let quantisation = if color.linear16 {
         compare::Quantisation::Linear16
     } else {

@@ -16,8 +16,11 @@
 //! and a map that cannot be made falls back to a `Vec`; smaller arrays,
 //! and every array on other systems, are `Vec`s. Each access through a
 //! `Big` checks its form and casts the map's bytes, so a walk takes the
-//! slices once ([`Big`] derefs to `[T]`). ARCHITECTURE.md, "Huge pages for
-//! the build's arrays", has the measurements.
+//! slices once ([`Big`] derefs to `[T]`). A frame's sample buffers are
+//! `Big`s for the same reason: a one-off render of a 320×240 scene at 2×2
+//! samples touches 7.4 MB of fresh frame memory, some 1 800 faults.
+//! ARCHITECTURE.md, "Huge pages for the build's arrays" and "Huge pages
+//! for the frames", has the measurements.
 
 use bytemuck::Pod;
 use memmap2::MmapMut;
@@ -32,18 +35,42 @@ const HUGE_PAGE: usize = 2 << 20;
 
 /// Arrays of at least this many bytes are mapped: a map is three system
 /// calls (map, advise, unmap) and a kernel object, at most 10 µs here,
-/// against the 512 faults (about 1 ms on the machines measured) of every
-/// huge page it spares.
-pub(crate) const MAPPED_BYTES: usize = HUGE_PAGE;
+/// and a huge page's first touch zeroes all of it (about 80 µs for 2 MB
+/// here), against the 256 faults of 4 KB pages (about 0.5 ms on the
+/// machines measured) that 1 MB would take. The map holds whole huge
+/// pages, so a smaller array's one huge page lies wholly inside it.
+pub const MAPPED_BYTES: usize = 1 << 20;
 
 /// An array of `T`, mapped and advised for huge pages when large (see the
 /// module's documentation), else a `Vec`. It derefs to `[T]`.
-pub(crate) struct Big<T: Pod> {
+pub struct Big<T: Pod> {
     /// The values, unless `map` holds them.
     heap: Vec<T>,
     /// The map, the offset of the array in it (where a huge page starts)
     /// and the number of `T` it holds.
     map: Option<(MmapMut, usize, usize)>,
+}
+
+impl<T: Pod + PartialEq> PartialEq for Big<T> {
+    fn eq(&self, other: &Self) -> bool {
+        **self == **other
+    }
+}
+
+/// A `Vec`'s values, in the `Vec` (no copy, so no huge pages: arrays made
+/// for speed are made by [`Big::filled`], [`Big::from_fn`] or
+/// [`Big::zeroed`]).
+impl<T: Pod> From<Vec<T>> for Big<T> {
+    fn from(heap: Vec<T>) -> Self {
+        Big { heap, map: None }
+    }
+}
+
+/// Collected into a `Vec` (as [`From<Vec<T>>`]).
+impl<T: Pod> FromIterator<T> for Big<T> {
+    fn from_iter<I: IntoIterator<Item = T>>(iter: I) -> Self {
+        Big::from(iter.into_iter().collect::<Vec<T>>())
+    }
 }
 
 impl<T: Pod> Default for Big<T> {
@@ -80,7 +107,7 @@ impl<T: Pod> Big<T> {
     /// `n` values with every byte zero: untouched memory where mapped;
     /// else a `Vec` (for `u64` and other primitives, memory the allocator
     /// gets zeroed from the system; a struct's zeros are written).
-    pub(crate) fn zeroed(n: usize) -> Big<T> {
+    pub fn zeroed(n: usize) -> Big<T> {
         mapped(n).unwrap_or_else(|| Big {
             heap: vec![T::zeroed(); n],
             map: None,
@@ -88,9 +115,8 @@ impl<T: Pod> Big<T> {
     }
 
     /// `n` copies of `value`, written in parallel (each page first
-    /// touched by the thread that fills it, as `frame::filled` does for
-    /// the frame's buffers).
-    pub(crate) fn filled(n: usize, value: T) -> Big<T>
+    /// touched by the thread that fills it).
+    pub fn filled(n: usize, value: T) -> Big<T>
     where
         T: Send + Sync,
     {
@@ -99,7 +125,7 @@ impl<T: Pod> Big<T> {
 
     /// The values `f(0), …, f(n − 1)`, formed in parallel and written
     /// once.
-    pub(crate) fn from_fn(n: usize, f: impl Fn(usize) -> T + Sync) -> Big<T>
+    pub fn from_fn(n: usize, f: impl Fn(usize) -> T + Sync) -> Big<T>
     where
         T: Send + Sync,
     {
@@ -117,13 +143,44 @@ impl<T: Pod> Big<T> {
 
     /// Appends `values` (a mapped array becomes a `Vec` first: only the
     /// light buffer's leaves grow this way, and they start empty).
-    pub(crate) fn extend_from_slice(&mut self, values: &[T]) {
+    pub fn extend_from_slice(&mut self, values: &[T]) {
         self.heap().extend_from_slice(values);
     }
 
     /// Appends one value (as [`Big::extend_from_slice`]).
-    pub(crate) fn push(&mut self, value: T) {
+    pub fn push(&mut self, value: T) {
         self.heap().push(value);
+    }
+
+    /// The values as a slice (what `Deref` gives).
+    #[must_use]
+    pub fn as_slice(&self) -> &[T] {
+        self
+    }
+
+    /// Makes this array `n` copies of `value`, in the memory it holds
+    /// where that is large enough (memory written before costs no fault:
+    /// `Frame::reset` and the rasterizer's buffers are refilled frame
+    /// after frame), else in a fresh array.
+    pub fn refill(&mut self, n: usize, value: T)
+    where
+        T: Send + Sync,
+    {
+        let room = match &self.map {
+            Some((m, at, _)) => (m.len() - at) / size_of::<T>().max(1),
+            None => self.heap.capacity(),
+        };
+        if room < n {
+            *self = Big::filled(n, value);
+            return;
+        }
+        match &mut self.map {
+            Some((_, _, len)) => *len = n,
+            None => self.heap.resize(n, value),
+        }
+        self.par_iter_mut()
+            .with_min_len(1 << 16)
+            .for_each(|x| *x = value);
     }
 
     /// The values as a growable `Vec`, converting a map into one.
@@ -154,12 +211,14 @@ fn mapped<T: Pod>(n: usize) -> Option<Big<T>> {
 /// An anonymous map with room for `bytes` from an offset where a huge
 /// page starts, advised for transparent huge pages, and that offset;
 /// `None` when the system makes no map. (The address space before the
-/// array is never touched and costs no memory; the huge page that holds
-/// the array's end may lie wholly inside the map, and then the kernel can
-/// back all of it: up to 2 MB beyond the array, as for any array of huge
-/// pages.)
+/// array is never touched and costs no memory; the map holds the array's
+/// bytes rounded up to whole huge pages after the offset, so the huge
+/// page that holds the array's end lies wholly inside it and the kernel
+/// can back all of it: up to 2 MB beyond the array, as for any array of
+/// huge pages.)
 fn advised_map(bytes: usize) -> Option<(MmapMut, usize)> {
-    let map = MmapMut::map_anon(bytes.checked_add(HUGE_PAGE)?).ok()?;
+    let whole = bytes.checked_next_multiple_of(HUGE_PAGE)?;
+    let map = MmapMut::map_anon(whole.checked_add(HUGE_PAGE)?).ok()?;
     let at = (HUGE_PAGE - map.as_ptr().addr() % HUGE_PAGE) % HUGE_PAGE;
     // Only advice: without huge pages the map is ordinary memory.
     #[cfg(target_os = "linux")]
