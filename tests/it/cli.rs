@@ -809,3 +809,42 @@ fn pov_export_renders_where_it_is_written() {
         }
     }
 }
+
+/// `--threads 1` runs the command on the calling thread itself (no
+/// worker is started); its images and G-buffers must be those of a
+/// pool of several workers, byte for byte, on both backends.
+#[test]
+fn one_thread_renders_what_several_do() {
+    let dir = temp("one_thread");
+    for backend in ["raster", "ray"] {
+        let mut files = Vec::new();
+        for threads in ["1", "3"] {
+            let out = dir.join(format!("{backend}-{threads}.png"));
+            let gbuf = dir.join(format!("{backend}-{threads}-g"));
+            let o = rendiff(&[
+                "render",
+                "scenes/dense.toml",
+                "--size",
+                "96x72",
+                "--backend",
+                backend,
+                "--threads",
+                threads,
+                "-o",
+                out.to_str().unwrap(),
+                "--gbuffer",
+                gbuf.to_str().unwrap(),
+            ]);
+            assert!(o.status.success(), "{}", stderr(&o));
+            let mut bytes = vec![std::fs::read(&out).unwrap()];
+            for f in rendiff::frame::GBUFFER_FILES {
+                bytes.push(std::fs::read(gbuf.join(f)).unwrap());
+            }
+            files.push(bytes);
+        }
+        assert!(
+            files[0] == files[1],
+            "{backend}: --threads 1 differs from 3"
+        );
+    }
+}
