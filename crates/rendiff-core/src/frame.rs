@@ -252,20 +252,28 @@ impl Frame {
         #[expect(clippy::cast_precision_loss, reason = "n² ≤ 256")]
         let inv = 1.0 / (n * n) as f32;
         let samples = &self.sample_color;
-        // Row by row in parallel (each pixel the same sum in the same order).
+        // Row by row in parallel (each pixel the same sum in the same
+        // order: its sample rows top to bottom, each left to right). The
+        // pixel row is the accumulator, and each sample row is taken as a
+        // slice cut into the pixels' runs of `n`: indexing every sample
+        // with its bounds check had cost `dense.toml`'s rasterizer render
+        // 5 % of its instructions (185 a pixel).
         self.color
             .par_chunks_mut((self.width as usize).max(1))
             .enumerate()
             .for_each(|(y, row)| {
-                for (x, pixel) in row.iter_mut().enumerate() {
-                    let mut acc = Rgb::BLACK;
-                    for b in 0..n {
-                        let at = (y * n + b) * sw + x * n;
-                        for a in 0..n {
-                            acc += samples[at + a].clamp01();
+                row.fill(Rgb::BLACK);
+                for b in 0..n {
+                    let start = (y * n + b) * sw;
+                    let line = &samples[start..start + sw];
+                    for (pixel, run) in row.iter_mut().zip(line.chunks_exact(n)) {
+                        for s in run {
+                            *pixel += s.clamp01();
                         }
                     }
-                    *pixel = if n == 1 { acc } else { acc * inv };
+                }
+                for pixel in row {
+                    *pixel = *pixel * inv;
                 }
             });
     }
