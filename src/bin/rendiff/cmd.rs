@@ -900,21 +900,15 @@ fn with_threads<T: Send>(
         Some(n) if n > most => bail!(
             "--threads {n}: expected at most {most} (8 per core of this machine, at least 64)"
         ),
-        Some(1) => {
-            // One worker: this thread itself (rayon's `use_current_thread`),
-            // so no second thread is started and handed the work. The
-            // registry it makes is leaked (rayon's rule for a local pool
-            // with the current thread): one per process, as here.
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(1)
-                .use_current_thread()
-                .build()
-                .context("could not make this thread the worker")?;
-            pool.install(f)
-        }
         Some(n) => {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(n)
+            let mut builder = rayon::ThreadPoolBuilder::new().num_threads(n);
+            if n == 1 {
+                // One worker: this thread itself, so no second thread is
+                // started and handed the work. Rayon leaks the registry of a
+                // local pool with the current thread: one per process here.
+                builder = builder.use_current_thread();
+            }
+            let pool = builder
                 .build()
                 .context("could not start the worker threads")?;
             pool.install(f)
