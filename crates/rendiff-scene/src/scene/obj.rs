@@ -168,19 +168,39 @@ pub(super) fn parse_f32(tok: &str) -> Result<f32, String> {
 /// the normal `f32` range, go to std. A test compares the two on a
 /// million tokens.
 fn plain_decimal(tok: &str) -> Option<f32> {
+    let b = tok.as_bytes();
+    let mut i = 0;
+    let v = scan_decimal(b, &mut i)?;
+    // The whole token, or it is not plain.
+    (i == b.len()).then_some(v)
+}
+
+/// The plain decimal ([`plain_decimal`]'s) that starts at `b[*i]` and
+/// runs to the first byte that is neither a digit nor its first `.`,
+/// with `*i` moved to that byte; `None` where the digits so far are not
+/// plain (none, more than nineteen, …). Whether the number ends there is
+/// the caller's to check: the quick lines read each number in the same
+/// pass that finds its end.
+#[inline]
+fn scan_decimal(b: &[u8], i: &mut usize) -> Option<f32> {
     const POW10: [f64; 23] = [
         1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16,
         1e17, 1e18, 1e19, 1e20, 1e21, 1e22,
     ];
-    let b = tok.as_bytes();
-    let (neg, digits) = match b.first()? {
-        b'-' => (true, &b[1..]),
-        b'+' => (false, &b[1..]),
-        _ => (false, b),
+    let neg = match b.get(*i) {
+        Some(b'-') => {
+            *i += 1;
+            true
+        }
+        Some(b'+') => {
+            *i += 1;
+            false
+        }
+        _ => false,
     };
     // Digits (at most 19: no overflow), and where the point stood.
     let (mut w, mut count, mut point) = (0u64, 0usize, None);
-    for &c in digits {
+    while let Some(&c) = b.get(*i) {
         if c.is_ascii_digit() {
             count += 1;
             if count > 19 {
@@ -190,8 +210,9 @@ fn plain_decimal(tok: &str) -> Option<f32> {
         } else if c == b'.' && point.is_none() {
             point = Some(count);
         } else {
-            return None;
+            break;
         }
+        *i += 1;
     }
     let frac = point.map_or(0, |p| count - p);
     if count == 0 || frac >= POW10.len() || w >= 1 << 53 {
@@ -416,49 +437,57 @@ fn resolve_index(i: i64, count: usize) -> Option<usize> {
     }
 }
 
-/// A corner `v`, `v/vt`, `v//vn` or `v/vt/vn` of plain integer indices
-/// ([`plain_integer`]'s: a sign and one to eighteen digits) within range,
-/// resolved as [`Reader::parse_corners`] resolves it, in one pass over its
-/// bytes (`corner_parts` and then `plain_integer` on each part were 160
-/// instructions a corner); `None` for any other corner, which
-/// `parse_corners` then reads or names.
-fn quick_corner(corner: &str, counts: [usize; 3]) -> Option<Corner> {
-    let b = corner.as_bytes();
+/// Whether `b` ends a word of a quick line ([`Reader::quick_line`]): a
+/// space, a tab or a line end.
+#[inline]
+fn ends_quick_word(b: Option<&u8>) -> bool {
+    matches!(b, None | Some(b' ' | b'\t' | b'\n' | b'\r'))
+}
+
+/// The corner `v`, `v/vt`, `v//vn` or `v/vt/vn` that starts at `b[*i]`
+/// and ends at a space, a tab, a line end or the text's end
+/// ([`ends_quick_word`]), of plain integer indices ([`plain_integer`]'s:
+/// a sign and one to eighteen digits) within range, resolved as
+/// [`Reader::parse_corners`] resolves it, with `*i` moved to its end, in
+/// one pass over its bytes (`corner_parts` and then `plain_integer` on
+/// each part were 160 instructions a corner); `None` for any other corner,
+/// which `parse_corners` then reads or names.
+#[inline]
+fn scan_corner(b: &[u8], i: &mut usize, counts: [usize; 3]) -> Option<Corner> {
     let mut out = [None; 3];
-    let mut i = 0;
     for (k, slot) in out.iter_mut().enumerate() {
-        let start = i;
-        let neg = b.get(i) == Some(&b'-');
-        if neg || b.get(i) == Some(&b'+') {
-            i += 1;
+        let start = *i;
+        let neg = b.get(*i) == Some(&b'-');
+        if neg || b.get(*i) == Some(&b'+') {
+            *i += 1;
         }
-        let digits = i;
+        let digits = *i;
         let mut v = 0i64;
-        while let Some(&c) = b.get(i).filter(|c| c.is_ascii_digit()) {
-            if i - digits == 18 {
+        while let Some(&c) = b.get(*i).filter(|c| c.is_ascii_digit()) {
+            if *i - digits == 18 {
                 return None;
             }
             v = v * 10 + i64::from(c - b'0');
-            i += 1;
+            *i += 1;
         }
-        if i == digits {
+        if *i == digits {
             // No digits: an empty part is none (an empty position then
             // makes the corner not plain, below); a lone sign is not plain.
-            if i != start {
+            if *i != start {
                 return None;
             }
         } else {
             *slot = Some(resolve_index(if neg { -v } else { v }, counts[k])?);
         }
-        match b.get(i) {
-            None => {
+        match b.get(*i) {
+            Some(b'/') => *i += 1,
+            None | Some(b' ' | b'\t' | b'\n' | b'\r') => {
                 return Some(Corner {
                     v: out[0]?,
                     t: out[1],
                     n: out[2],
                 });
             }
-            Some(b'/') => i += 1,
             Some(_) => return None,
         }
     }
@@ -604,6 +633,7 @@ impl<T: Copy> Pool<T> {
 
     /// The mesh's index of file entry `g`, copying it on first use in the
     /// model; also says how many entries it copied.
+    #[inline(always)]
     fn index(&mut self, g: usize, out: &mut Vec<T>) -> (u32, u64) {
         let stand_in = u64::from(self.place_stand_in(out));
         let c = self.copy[g];
@@ -661,9 +691,8 @@ struct Reader<'a> {
     reserved: u64,
     pending: u64,
     lines_since: usize,
-    /// Buffers for a face: its corners, and their indices in the mesh.
+    /// The corners of the face being read.
     corners: Vec<Corner>,
-    indices: [Vec<u32>; 3],
     /// The current `usemtl` ([`NO_USEMTL`] before the first).
     current_mtl: u32,
 }
@@ -850,101 +879,141 @@ impl Reader<'_> {
         self.add_face(line, args)
     }
 
-    /// Adds the face whose corners [`Reader::parse_corners`] (or
-    /// [`Reader::quick_line`]) left in `self.corners`; `args` are the
-    /// corners as written, which only a face of more than three corners
-    /// names (in a triangulation's error).
+    /// The mesh's indices of a corner's position, uv and normal, each
+    /// copied into the mesh on its first use in the model; adds the bytes
+    /// copied to `copied`. A corner without a uv (a normal) as the model's
+    /// first asks for the file's first one as a stand-in (tobj's).
+    #[inline(always)]
+    fn corner_indices(&mut self, c: Corner, copied: &mut u64) -> (u32, Option<u32>, Option<u32>) {
+        let first = self.model_corners == 0;
+        self.model_corners += 1;
+        let (v, new) = self.positions.index(c.v, &mut self.data.positions);
+        *copied += new * BYTES_PER_COPY[0];
+        let t = match c.t {
+            Some(g) => {
+                let (i, new) = self.uvs.index(g, &mut self.data.uvs);
+                *copied += new * BYTES_PER_COPY[2];
+                Some(i)
+            }
+            None => {
+                self.uvs.stand_in |= first;
+                None
+            }
+        };
+        let n = match c.n {
+            Some(g) => {
+                let (i, new) = self.normals.index(g, &mut self.data.normals);
+                *copied += new * BYTES_PER_COPY[1];
+                Some(i)
+            }
+            None => {
+                self.normals.stand_in |= first;
+                None
+            }
+        };
+        (v, t, n)
+    }
+
+    /// Appends a triangle of the face on `line`.
+    #[inline]
+    fn push_triangle(&mut self, line: usize, tri: MeshTri) {
+        let data = &mut self.data;
+        data.triangles.push(tri);
+        data.lines.push(u32::try_from(line).unwrap_or(u32::MAX));
+        if !data.usemtl.is_empty() {
+            data.tri_usemtl.push(self.current_mtl);
+        }
+    }
+
+    /// Adds a face of three corners (from [`Reader::quick_line`] or
+    /// [`Reader::add_face`]): one triangle, without the buffers a face
+    /// of more corners needs (`add_face`'s general path had been about
+    /// 500 instructions a triangle of `scenes/dense.toml`'s meshes).
+    fn add_triangle(&mut self, line: usize, corners: [Corner; 3]) -> Result<(), LoadError> {
+        self.triangles_to_be += 1;
+        self.count(line, BYTES_PER_TRIANGLE_TO_BE)?;
+        let mut copied = 0u64;
+        let [a, b, c] = corners.map(|k| self.corner_indices(k, &mut copied));
+        self.model_faces += 1;
+        self.data.faces += 1;
+        self.pending += copied;
+        let all = |x: Option<u32>, y: Option<u32>, z: Option<u32>| Some([x?, y?, z?]);
+        let tri = MeshTri {
+            v: [a.0, b.0, c.0],
+            n: all(a.2, b.2, c.2),
+            t: all(a.1, b.1, c.1),
+        };
+        self.push_triangle(line, tri);
+        Ok(())
+    }
+
+    /// Adds the face whose corners [`Reader::parse_corners`] left in
+    /// `self.corners`; `args` are the corners as written, which only a
+    /// face of more than three corners names (in a triangulation's error).
     fn add_face(&mut self, line: usize, args: &[&str]) -> Result<(), LoadError> {
+        if let [a, b, c] = self.corners[..] {
+            return self.add_triangle(line, [a, b, c]);
+        }
         let to_be = (self.corners.len() - 2) as u64;
         self.triangles_to_be += to_be;
         self.count(line, to_be * BYTES_PER_TRIANGLE_TO_BE)?;
 
         // The mesh's indices of the corners, copying on first use.
         let corners = std::mem::take(&mut self.corners);
-        let [mut v, mut t, mut n] = std::mem::take(&mut self.indices);
-        v.clear();
-        t.clear();
-        n.clear();
-        let has_t = corners.iter().all(|c| c.t.is_some());
-        let has_n = corners.iter().all(|c| c.n.is_some());
+        let (mut v, mut t, mut n) = (Vec::new(), Vec::new(), Vec::new());
         let mut copied = 0u64;
-        for c in &corners {
-            let first = self.model_corners == 0;
-            self.model_corners += 1;
-            let (i, new) = self.positions.index(c.v, &mut self.data.positions);
-            copied += new * BYTES_PER_COPY[0];
+        for &c in &corners {
+            let (i, ti, ni) = self.corner_indices(c, &mut copied);
             v.push(i);
-            match c.t {
-                Some(g) => {
-                    let (i, new) = self.uvs.index(g, &mut self.data.uvs);
-                    copied += new * BYTES_PER_COPY[2];
-                    t.push(i);
-                }
-                None => self.uvs.stand_in |= first,
-            }
-            match c.n {
-                Some(g) => {
-                    let (i, new) = self.normals.index(g, &mut self.data.normals);
-                    copied += new * BYTES_PER_COPY[1];
-                    n.push(i);
-                }
-                None => self.normals.stand_in |= first,
-            }
+            t.extend(ti);
+            n.extend(ni);
         }
+        let has_t = t.len() == corners.len();
+        let has_n = n.len() == corners.len();
         self.model_faces += 1;
         self.data.faces += 1;
         self.pending += copied;
 
-        let number = u32::try_from(line).unwrap_or(u32::MAX);
-        let current_mtl = self.current_mtl;
-        let push = |data: &mut MeshData, c: [usize; 3]| {
-            data.triangles.push(MeshTri {
-                v: c.map(|k| v[k]),
-                n: has_n.then(|| c.map(|k| n[k])),
-                t: has_t.then(|| c.map(|k| t[k])),
-            });
-            data.lines.push(number);
-            if !data.usemtl.is_empty() {
-                data.tri_usemtl.push(current_mtl);
-            }
-        };
-        if corners.len() == 3 {
-            push(&mut self.data, [0, 1, 2]);
-        } else {
-            let pts: Vec<DVec3> = v
-                .iter()
-                .map(|&i| {
-                    let p = self.data.positions[i as usize];
-                    DVec3::new(f64::from(p.x), f64::from(p.y), f64::from(p.z))
-                })
-                .collect();
-            // A keyhole face (a ring with a hole, joined by a bridge edge
-            // walked once each way) is its outline and holes.
-            let rings = keyhole_rings(&v, &pts);
-            let at = |ring: &[usize]| ring.iter().map(|&k| pts[k]).collect::<Vec<DVec3>>();
-            let outline = at(&rings[0]);
-            let holes: Vec<Vec<DVec3>> = rings[1..].iter().map(|r| at(r)).collect();
-            let flat: Vec<usize> = rings.iter().flatten().copied().collect();
-            let tri = polygon::triangulate(
-                &outline,
-                &holes,
-                PolygonOptions {
-                    check_planarity: false,
+        let pts: Vec<DVec3> = v
+            .iter()
+            .map(|&i| {
+                let p = self.data.positions[i as usize];
+                DVec3::new(f64::from(p.x), f64::from(p.y), f64::from(p.z))
+            })
+            .collect();
+        // A keyhole face (a ring with a hole, joined by a bridge edge
+        // walked once each way) is its outline and holes.
+        let rings = keyhole_rings(&v, &pts);
+        let at = |ring: &[usize]| ring.iter().map(|&k| pts[k]).collect::<Vec<DVec3>>();
+        let outline = at(&rings[0]);
+        let holes: Vec<Vec<DVec3>> = rings[1..].iter().map(|r| at(r)).collect();
+        let flat: Vec<usize> = rings.iter().flatten().copied().collect();
+        let tri = polygon::triangulate(
+            &outline,
+            &holes,
+            PolygonOptions {
+                check_planarity: false,
+            },
+        )
+        .map_err(|e| {
+            // The triangulator names points of the rings, in ring order.
+            let named: Vec<&str> = flat.iter().map(|&k| args[k]).collect();
+            self.err(line, face_error(&e, &named))
+        })?;
+        // The CDT triangles wind around the outline's Newell normal,
+        // which follows the face's own winding.
+        for c in &tri.triangles {
+            let c = c.map(|i| flat[i as usize]);
+            self.push_triangle(
+                line,
+                MeshTri {
+                    v: c.map(|k| v[k]),
+                    n: has_n.then(|| c.map(|k| n[k])),
+                    t: has_t.then(|| c.map(|k| t[k])),
                 },
-            )
-            .map_err(|e| {
-                // The triangulator names points of the rings, in ring order.
-                let named: Vec<&str> = flat.iter().map(|&k| args[k]).collect();
-                self.err(line, face_error(&e, &named))
-            })?;
-            // The CDT triangles wind around the outline's Newell normal,
-            // which follows the face's own winding.
-            for c in &tri.triangles {
-                push(&mut self.data, c.map(|i| flat[i as usize]));
-            }
+            );
         }
         self.corners = corners;
-        self.indices = [v, t, n];
         Ok(())
     }
 
@@ -987,7 +1056,7 @@ impl Reader<'_> {
 
     /// The two lines a mesh file is made of, read without tokenizing:
     /// `v` and three plain decimals ([`plain_decimal`]), or `f` and three
-    /// corners of plain integer indices within range ([`quick_corner`]),
+    /// corners of plain integer indices within range ([`scan_corner`]),
     /// the words apart by spaces or tabs, nothing after the last but
     /// spaces or tabs. Returns the text after the line; `None`, having
     /// changed nothing, for any other line (white space before the
@@ -1005,39 +1074,30 @@ impl Reader<'_> {
             [b'f', b' ' | b'\t', ..] => false,
             _ => return Ok(None),
         };
-        let mut words = [(0, 0); 3];
+        // Each word is read where it starts, in the pass that finds its
+        // end: a space, a tab, a line end or the text's end (a word
+        // ending anywhere else, `#` or a non-ASCII byte among them, is
+        // not plain, and so the line is not quick).
         let mut i = 1;
-        for w in &mut words {
-            while i < b.len() && matches!(b[i], b' ' | b'\t') {
-                i += 1;
+        let skip_blanks = |i: &mut usize| {
+            while matches!(b.get(*i), Some(b' ' | b'\t')) {
+                *i += 1;
             }
-            let start = i;
-            while i < b.len() && BYTE_CLASS[usize::from(b[i])] == WORD {
-                i += 1;
-            }
-            if i == start {
-                return Ok(None);
-            }
-            *w = (start, i);
-        }
-        while i < b.len() && matches!(b[i], b' ' | b'\t') {
-            i += 1;
-        }
-        if i < b.len() && !matches!(b[i], b'\n' | b'\r') {
-            return Ok(None);
-        }
-        // Words end before a space, a tab, a line end, `#` or a non-ASCII
-        // byte: on character boundaries.
-        let word = |k: usize| &text[words[k].0..words[k].1];
+        };
         if vertex {
-            let (Some(x), Some(y), Some(z)) = (
-                plain_decimal(word(0)),
-                plain_decimal(word(1)),
-                plain_decimal(word(2)),
-            ) else {
+            let mut x = [0.0f32; 3];
+            for v in &mut x {
+                skip_blanks(&mut i);
+                match scan_decimal(b, &mut i) {
+                    Some(d) if ends_quick_word(b.get(i)) => *v = d,
+                    _ => return Ok(None),
+                }
+            }
+            skip_blanks(&mut i);
+            if !matches!(b.get(i), None | Some(b'\n' | b'\r')) {
                 return Ok(None);
-            };
-            self.positions.push(Vec3::new(x, y, z));
+            }
+            self.positions.push(Vec3::from_array(x));
             self.count(line, BYTES_PER_READ_VERTEX)?;
         } else {
             let counts = [
@@ -1045,17 +1105,23 @@ impl Reader<'_> {
                 self.uvs.file.len(),
                 self.normals.file.len(),
             ];
-            let (Some(c0), Some(c1), Some(c2)) = (
-                quick_corner(word(0), counts),
-                quick_corner(word(1), counts),
-                quick_corner(word(2), counts),
-            ) else {
+            let mut corners = [Corner {
+                v: 0,
+                t: None,
+                n: None,
+            }; 3];
+            for c in &mut corners {
+                skip_blanks(&mut i);
+                let Some(read) = scan_corner(b, &mut i, counts) else {
+                    return Ok(None);
+                };
+                *c = read;
+            }
+            skip_blanks(&mut i);
+            if !matches!(b.get(i), None | Some(b'\n' | b'\r')) {
                 return Ok(None);
-            };
-            self.corners.clear();
-            self.corners.extend([c0, c1, c2]);
-            // A triangle's corners as written are never named.
-            self.add_face(line, &[])?;
+            }
+            self.add_triangle(line, corners)?;
         }
         self.lines_since += 1;
         if self.lines_since >= LINES_PER_RESERVATION {
@@ -1171,7 +1237,6 @@ fn read(
         pending: 0,
         lines_since: 0,
         corners: Vec::new(),
-        indices: [Vec::new(), Vec::new(), Vec::new()],
         current_mtl: NO_USEMTL,
     };
     let mut toks: Vec<&str> = Vec::new();
@@ -1314,10 +1379,15 @@ mod tests {
         };
         type Next<'a> = &'a mut dyn FnMut(u64) -> u64;
         let number = |next: Next<'_>, odd: bool| -> String {
-            match if odd { next(10) } else { 3 + next(7) } {
+            match if odd { next(13) } else { 3 + next(7) } {
                 0 => "1e-3".into(),
                 1 => "-".into(),
                 2 => "1234567890123456789012".into(),
+                // A plain decimal and more word after it, which would
+                // read as two numbers if a number's end went unchecked.
+                10 => "1-2".into(),
+                11 => "3.5.5".into(),
+                12 => "2+7".into(),
                 3 => format!("{}", f32::from_bits(next(1 << 31) as u32 & 0x4FFF_FFFF)),
                 _ => format!(
                     "{}{}.{}",
