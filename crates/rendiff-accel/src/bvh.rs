@@ -931,7 +931,7 @@ fn build_morton<F: Fn(u32) -> [Vec3; 3] + Sync>(ids: &[u32], tri: &F) -> (BNode,
     radix_sort_codes(&mut keys);
     // The sorted keys carry the triangles' indices; only the leaves read
     // their boxes.
-    let tree = morton_range(&boxes, &keys, 0);
+    let tree = morton_range(&boxes, &keys, 0, None);
     (tree, keys)
 }
 
@@ -984,20 +984,38 @@ fn keys_bounds<F: Fn(u32) -> [Vec3; 3]>(boxes: &TriBoxes<'_, F>, keys: &[u64]) -
 /// The subtree of a Morton-sorted range (see [`build_morton`]). A range
 /// of up to [`MAX_LEAF`] is a leaf where the SAH says so: its packs cost
 /// no more than a node visit plus its two halves' packs weighted by
-/// their areas.
+/// their areas. `known` is the range's bounds where the caller formed
+/// them (a half of such a range): a triangle's box is then formed once
+/// below `MAX_LEAF`, not again for its leaf. (The union of the halves'
+/// bounds is the bounds of the whole bit for bit: `min` and `max` keep
+/// the later of two equal values, so a fold over the whole and the
+/// union of the folds over its halves both keep the last triangle's
+/// value among those equal to the extreme.)
 fn morton_range<F: Fn(u32) -> [Vec3; 3] + Sync>(
     boxes: &TriBoxes<'_, F>,
     keys: &[u64],
     offset: usize,
+    known: Option<Box4>,
 ) -> BNode {
     let n = keys.len();
-    let leaf = || BNode::Leaf {
-        bounds: keys_bounds(boxes, keys).aabb(),
-        start: offset,
-        count: n,
+    let leaf = |bounds: Option<Box4>| {
+        let own = || keys_bounds(boxes, keys).aabb();
+        debug_assert!(
+            bounds.is_none_or(|b| {
+                let (a, o) = (b.aabb(), own());
+                a.min.to_array().map(f32::to_bits) == o.min.to_array().map(f32::to_bits)
+                    && a.max.to_array().map(f32::to_bits) == o.max.to_array().map(f32::to_bits)
+            }),
+            "the halves' bounds are the range's, bit for bit"
+        );
+        BNode::Leaf {
+            bounds: bounds.map_or_else(own, |b| b.aabb()),
+            start: offset,
+            count: n,
+        }
     };
     if n <= 4 {
-        return leaf();
+        return leaf(known);
     }
     // The codes are the keys' upper halves: the first bit in which the
     // range's first and last codes differ is the first in which the keys
@@ -1010,6 +1028,7 @@ fn morton_range<F: Fn(u32) -> [Vec3; 3] + Sync>(
         keys.partition_point(|k| k & bit == 0)
     };
     let (lk, rk) = keys.split_at(mid);
+    let mut halves = (None, None);
     if n <= MAX_LEAF {
         let (lb, rb) = (keys_bounds(boxes, lk), keys_bounds(boxes, rk));
         let mut all = lb;
@@ -1020,18 +1039,19 @@ fn morton_range<F: Fn(u32) -> [Vec3; 3] + Sync>(
                 + rb.half_area() * pack_cost(to_u32(n - mid)))
                 / all.half_area().max(f32::MIN_POSITIVE);
         if pack_cost(to_u32(n)) <= split {
-            return leaf();
+            return leaf(Some(all));
         }
+        halves = (Some(lb), Some(rb));
     }
     let (l, r) = if n > PARALLEL_THRESHOLD {
         rayon::join(
-            || morton_range(boxes, lk, offset),
-            || morton_range(boxes, rk, offset + mid),
+            || morton_range(boxes, lk, offset, halves.0),
+            || morton_range(boxes, rk, offset + mid, halves.1),
         )
     } else {
         (
-            morton_range(boxes, lk, offset),
-            morton_range(boxes, rk, offset + mid),
+            morton_range(boxes, lk, offset, halves.0),
+            morton_range(boxes, rk, offset + mid, halves.1),
         )
     };
     BNode::inner(l.bounds().union(r.bounds()), [l, r])
