@@ -481,14 +481,14 @@ fn scan_corner(b: &[u8], i: &mut usize, counts: [usize; 3]) -> Option<Corner> {
         }
         match b.get(*i) {
             Some(b'/') => *i += 1,
-            None | Some(b' ' | b'\t' | b'\n' | b'\r') => {
+            end if ends_quick_word(end) => {
                 return Some(Corner {
                     v: out[0]?,
                     t: out[1],
                     n: out[2],
                 });
             }
-            Some(_) => return None,
+            _ => return None,
         }
     }
     // A fourth part.
@@ -644,6 +644,28 @@ impl<T: Copy> Pool<T> {
         out.push(self.file[g]);
         self.copy[g] = i;
         (i, stand_in + 1)
+    }
+
+    /// [`Pool::index`] of a corner's optional entry (`None` and no copy
+    /// where the corner has none, which, on the model's `first` corner,
+    /// asks for the file's first entry as its stand-in: tobj's).
+    #[inline(always)]
+    fn index_or_stand_in(
+        &mut self,
+        g: Option<usize>,
+        first: bool,
+        out: &mut Vec<T>,
+    ) -> (Option<u32>, u64) {
+        match g {
+            Some(g) => {
+                let (i, new) = self.index(g, out);
+                (Some(i), new)
+            }
+            None => {
+                self.stand_in |= first;
+                (None, 0)
+            }
+        }
     }
 
     /// Puts the pending stand-in in place (the file has entries now).
@@ -881,36 +903,18 @@ impl Reader<'_> {
 
     /// The mesh's indices of a corner's position, uv and normal, each
     /// copied into the mesh on its first use in the model; adds the bytes
-    /// copied to `copied`. A corner without a uv (a normal) as the model's
-    /// first asks for the file's first one as a stand-in (tobj's).
+    /// copied to `copied`.
     #[inline(always)]
     fn corner_indices(&mut self, c: Corner, copied: &mut u64) -> (u32, Option<u32>, Option<u32>) {
         let first = self.model_corners == 0;
         self.model_corners += 1;
-        let (v, new) = self.positions.index(c.v, &mut self.data.positions);
-        *copied += new * BYTES_PER_COPY[0];
-        let t = match c.t {
-            Some(g) => {
-                let (i, new) = self.uvs.index(g, &mut self.data.uvs);
-                *copied += new * BYTES_PER_COPY[2];
-                Some(i)
-            }
-            None => {
-                self.uvs.stand_in |= first;
-                None
-            }
-        };
-        let n = match c.n {
-            Some(g) => {
-                let (i, new) = self.normals.index(g, &mut self.data.normals);
-                *copied += new * BYTES_PER_COPY[1];
-                Some(i)
-            }
-            None => {
-                self.normals.stand_in |= first;
-                None
-            }
-        };
+        let (v, new_v) = self.positions.index(c.v, &mut self.data.positions);
+        let (t, new_t) = self.uvs.index_or_stand_in(c.t, first, &mut self.data.uvs);
+        let (n, new_n) = self
+            .normals
+            .index_or_stand_in(c.n, first, &mut self.data.normals);
+        *copied +=
+            new_v * BYTES_PER_COPY[0] + new_n * BYTES_PER_COPY[1] + new_t * BYTES_PER_COPY[2];
         (v, t, n)
     }
 
@@ -1084,6 +1088,11 @@ impl Reader<'_> {
                 *i += 1;
             }
         };
+        // After the third word: blanks, then the line's (or text's) end.
+        let ends_line = |i: &mut usize| {
+            skip_blanks(i);
+            matches!(b.get(*i), None | Some(b'\n' | b'\r'))
+        };
         if vertex {
             let mut x = [0.0f32; 3];
             for v in &mut x {
@@ -1093,8 +1102,7 @@ impl Reader<'_> {
                     _ => return Ok(None),
                 }
             }
-            skip_blanks(&mut i);
-            if !matches!(b.get(i), None | Some(b'\n' | b'\r')) {
+            if !ends_line(&mut i) {
                 return Ok(None);
             }
             self.positions.push(Vec3::from_array(x));
@@ -1117,8 +1125,7 @@ impl Reader<'_> {
                 };
                 *c = read;
             }
-            skip_blanks(&mut i);
-            if !matches!(b.get(i), None | Some(b'\n' | b'\r')) {
+            if !ends_line(&mut i) {
                 return Ok(None);
             }
             self.add_triangle(line, corners)?;
