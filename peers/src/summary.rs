@@ -250,12 +250,12 @@ fn frames(repeats: usize) -> Result<(f64, f64)> {
     Ok((raster_ms, ray_ms))
 }
 
-/// The whole process, wall clock and each process's CPU time, 1 thread: `rendiff render` (load,
-/// tessellate, build, render, PNG) with its faster backend at equal
-/// error (the ray tracer alone where the scene has a ray tree), against
-/// `povray` on the scene's mesh export (start-up, parse, bounding, trace,
-/// PNG). Needs `target/release/rendiff` (`make peers`
-/// builds it). In ms.
+/// The whole process, wall clock and each process's CPU time, 1
+/// thread: `rendiff render` (load, tessellate, build, render, PNG) with
+/// its faster backend at equal error (the ray tracer alone where the
+/// scene has a ray tree), against `povray` on the scene's mesh export
+/// (start-up, parse, bounding, trace, PNG). Needs
+/// `target/release/rendiff` (`make peers` builds it). In ms.
 fn whole_process(scene: &Path, repeats: usize) -> Result<Whole> {
     let exe = Path::new("target/release/rendiff");
     if !exe.exists() {
@@ -359,9 +359,9 @@ fn whole_process(scene: &Path, repeats: usize) -> Result<Whole> {
 }
 
 /// The whole-process medians: wall time (what the row's ratio is), and
-/// each process's own CPU time (user and system), which leaves out the
-/// waiting a shared host adds to the wall time (`None` where the
-/// system does not report it).
+/// each process's own CPU time (user and system), which leaves out
+/// the time a process waits, for the host's CPUs or idle by its own
+/// design (`None` where the system does not report it).
 struct Whole {
     ours_ms: f64,
     pov_ms: f64,
@@ -369,7 +369,7 @@ struct Whole {
     pov_cpu: Option<f64>,
 }
 
-/// `struct rusage` of Linux (and the BSDs): two `timeval`s, then
+/// `struct rusage` of 64-bit Linux: two `timeval`s, then
 /// fourteen `long` counters this module does not read.
 #[cfg(all(target_os = "linux", target_pointer_width = "64"))]
 #[repr(C)]
