@@ -275,8 +275,8 @@ pub(crate) struct TriPack {
 }
 
 impl TriPack {
-    /// An empty pack (no lanes; the build's arrays start filled with
-    /// it, and the tests fill one lane by lane).
+    /// An empty pack (no lanes), which the tests fill lane by lane.
+    #[cfg(test)]
     pub(crate) const EMPTY: TriPack = TriPack {
         v: [[Vec4::ZERO; 3]; 3],
         lanes: 0,
