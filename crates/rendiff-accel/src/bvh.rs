@@ -851,25 +851,34 @@ fn par_sort_codes(keys: &mut [u64]) {
 /// of them, found by opening the inner child of largest surface area
 /// until there are `WIDTH` or none is inner; and how many.
 fn gather(node: &BNode) -> ([&BNode; WIDTH], usize) {
+    // Each child's surface area, formed once when it joins (a leaf's is
+    // −∞: never opened); the scan for the largest had formed every inner
+    // child's area again at each opening, some 27 areas a node.
+    let area = |k: &BNode| match k {
+        BNode::Inner { bounds, .. } => bounds.half_area(),
+        BNode::Leaf { .. } => f32::NEG_INFINITY,
+    };
     let mut kids: [&BNode; WIDTH] = [node; WIDTH];
+    let mut areas = [f32::NEG_INFINITY; WIDTH];
     let mut len = match node {
         BNode::Inner { children, .. } => {
             kids[0] = &children[0];
             kids[1] = &children[1];
+            areas[0] = area(kids[0]);
+            areas[1] = area(kids[1]);
             2
         }
         BNode::Leaf { .. } => 1,
     };
     while len < WIDTH {
+        // The first inner child of the largest area (an area that is not
+        // above −∞, a leaf's, is never opened).
         let mut open = None;
         let mut best_area = f32::NEG_INFINITY;
-        for (i, k) in kids[..len].iter().enumerate() {
-            if let BNode::Inner { bounds, .. } = k {
-                let a = bounds.half_area();
-                if a > best_area {
-                    best_area = a;
-                    open = Some(i);
-                }
+        for (i, &a) in areas[..len].iter().enumerate() {
+            if a > best_area {
+                best_area = a;
+                open = Some(i);
             }
         }
         let Some(i) = open else { break };
@@ -878,6 +887,8 @@ fn gather(node: &BNode) -> ([&BNode; WIDTH], usize) {
         };
         kids[i] = &children[0];
         kids[len] = &children[1];
+        areas[i] = area(kids[i]);
+        areas[len] = area(kids[len]);
         len += 1;
     }
     (kids, len)
