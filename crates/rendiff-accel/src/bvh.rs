@@ -218,10 +218,14 @@ enum BNode {
     },
     Inner {
         bounds: Aabb,
+        /// `bounds.half_area()`, which [`gather`] compares: formed once.
+        area: f32,
         children: Box<[BNode; 2]>,
         /// What the subtree becomes as the root of an 8-wide node: see
-        /// [`Tally`].
-        tally: Tally,
+        /// [`Tally`]; its nodes and packs as `u32` (each below the
+        /// triangles' count, whose ids are `u32`), so that the node, area
+        /// and all, is as small as a leaf's 48 bytes.
+        tally: [u32; 2],
     },
 }
 
@@ -249,8 +253,9 @@ impl BNode {
     fn inner(bounds: Aabb, children: [BNode; 2]) -> BNode {
         let mut node = BNode::Inner {
             bounds,
+            area: bounds.half_area(),
             children: Box::new(children),
-            tally: Tally::default(),
+            tally: [0; 2],
         };
         let (kids, len) = gather(&node);
         let t = kids[..len]
@@ -263,7 +268,8 @@ impl BNode {
                 }
             });
         if let BNode::Inner { tally, .. } = &mut node {
-            *tally = t;
+            let to_u32 = |k: usize| u32::try_from(k).unwrap_or(u32::MAX);
+            *tally = [to_u32(t.nodes), to_u32(t.packs)];
         }
         node
     }
@@ -275,7 +281,13 @@ impl BNode {
                 nodes: 0,
                 packs: count.div_ceil(4),
             },
-            BNode::Inner { tally, .. } => *tally,
+            BNode::Inner {
+                tally: [nodes, packs],
+                ..
+            } => Tally {
+                nodes: *nodes as usize,
+                packs: *packs as usize,
+            },
         }
     }
 }
@@ -283,12 +295,10 @@ impl BNode {
 /// Drops a binary tree, its large subtrees in parallel (freeing a
 /// million boxes one by one was a serial tail of the build).
 fn drop_tree(node: BNode) {
-    if let BNode::Inner {
-        children, tally, ..
-    } = node
-    {
+    let packs = node.tally().packs;
+    if let BNode::Inner { children, .. } = node {
         let [l, r] = *children;
-        if tally.packs > PARALLEL_THRESHOLD / 4 {
+        if packs > PARALLEL_THRESHOLD / 4 {
             rayon::join(|| drop_tree(l), || drop_tree(r));
         } else {
             drop(l);
@@ -851,11 +861,12 @@ fn par_sort_codes(keys: &mut [u64]) {
 /// of them, found by opening the inner child of largest surface area
 /// until there are `WIDTH` or none is inner; and how many.
 fn gather(node: &BNode) -> ([&BNode; WIDTH], usize) {
-    // Each child's surface area, formed once when it joins (a leaf's is
-    // −∞: never opened); the scan for the largest had formed every inner
-    // child's area again at each opening, some 27 areas a node.
+    // Each child's surface area, read once when it joins (a leaf's is
+    // −∞: never opened): the scan for the largest had formed every inner
+    // child's area again at each opening, some 27 areas a node, and each
+    // node's area again in the gather of every ancestor that reaches it.
     let area = |k: &BNode| match k {
-        BNode::Inner { bounds, .. } => bounds.half_area(),
+        BNode::Inner { area, .. } => *area,
         BNode::Leaf { .. } => f32::NEG_INFINITY,
     };
     let mut kids: [&BNode; WIDTH] = [node; WIDTH];
