@@ -223,8 +223,8 @@ enum BNode {
         children: Box<[BNode; 2]>,
         /// What the subtree becomes as the root of an 8-wide node: see
         /// [`Tally`]; its nodes and packs as `u32` (each below the
-        /// triangles' count, whose ids are `u32`), so that the node, area
-        /// and all, is as small as a leaf's 48 bytes.
+        /// triangles' count, whose ids are `u32`), so that a `BNode`, area
+        /// and all, stays 48 bytes.
         tally: [u32; 2],
     },
 }
@@ -882,8 +882,8 @@ fn gather(node: &BNode) -> ([&BNode; WIDTH], usize) {
         BNode::Leaf { .. } => 1,
     };
     while len < WIDTH {
-        // The first inner child of the largest area (an area that is not
-        // above −∞, a leaf's, is never opened).
+        // The first inner child of the largest area (a leaf's −∞ is never
+        // above the best, so a leaf is never opened).
         let mut open = None;
         let mut best_area = f32::NEG_INFINITY;
         for (i, &a) in areas[..len].iter().enumerate() {
