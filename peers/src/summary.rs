@@ -369,47 +369,28 @@ struct Whole {
     pov_cpu: Option<f64>,
 }
 
-/// `struct rusage` of 64-bit Linux: two `timeval`s, then
-/// fourteen `long` counters this module does not read.
-#[cfg(all(target_os = "linux", target_pointer_width = "64"))]
-#[repr(C)]
-struct RUsage {
-    utime: [i64; 2],
-    stime: [i64; 2],
-    rest: [i64; 14],
-}
-
-#[cfg(all(target_os = "linux", target_pointer_width = "64"))]
-unsafe extern "C" {
-    fn getrusage(who: i32, usage: *mut RUsage) -> i32;
-}
-
 /// The CPU time (user and system) of every child process this process
 /// has waited for, in ms: a child's own is the difference around its
-/// run. `None` off Linux (x86-64's `long` layout) or on an error.
-#[cfg(all(target_os = "linux", target_pointer_width = "64"))]
+/// run. `None` off Unix or on an error. (Through the `libc` crate, which
+/// `memmap2` already brings in: its `rusage` has each target's layout.)
+#[cfg(unix)]
 fn children_cpu_ms() -> Option<f64> {
-    /// `RUSAGE_CHILDREN`.
-    const CHILDREN: i32 = -1;
-    let mut u = RUsage {
-        utime: [0; 2],
-        stime: [0; 2],
-        rest: [0; 14],
-    };
-    // SAFETY: `getrusage` writes one `struct rusage` (144 bytes on 64-bit
-    // Linux: two 16-byte `timeval`s and fourteen 8-byte `long`s, the
-    // layout of `RUsage`) into the memory it is given, which is ours.
-    let rc = unsafe { getrusage(CHILDREN, &raw mut u) };
+    // SAFETY: `rusage` is plain old data (integers and `timeval`s), for
+    // which all-zero bytes are a value.
+    let mut u: libc::rusage = unsafe { std::mem::zeroed() };
+    // SAFETY: `getrusage` writes one `struct rusage` into the memory it
+    // is given, which is ours and of that type.
+    let rc = unsafe { libc::getrusage(libc::RUSAGE_CHILDREN, &raw mut u) };
     #[expect(
         clippy::cast_precision_loss,
         reason = "seconds and microseconds of a run"
     )]
-    let ms = |tv: [i64; 2]| tv[0] as f64 * 1e3 + tv[1] as f64 * 1e-3;
-    (rc == 0).then(|| ms(u.utime) + ms(u.stime))
+    let ms = |tv: libc::timeval| tv.tv_sec as f64 * 1e3 + tv.tv_usec as f64 * 1e-3;
+    (rc == 0).then(|| ms(u.ru_utime) + ms(u.ru_stime))
 }
 
-/// (No child CPU times off 64-bit Linux.)
-#[cfg(not(all(target_os = "linux", target_pointer_width = "64")))]
+/// (No child CPU times off Unix.)
+#[cfg(not(unix))]
 fn children_cpu_ms() -> Option<f64> {
     None
 }
@@ -494,4 +475,35 @@ fn scenes_in(dir: &Path) -> Result<Vec<PathBuf>> {
         .collect();
     scenes.sort();
     Ok(scenes)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A child that spends CPU shows in the difference of the children's
+    /// CPU time around it, and never more than its wall time allows (one
+    /// thread of it), plus one scheduler tick (10 ms at the coarsest
+    /// kernel clock, 100 Hz), by which a kernel may account CPU time.
+    #[cfg(unix)]
+    #[test]
+    fn a_childs_cpu_time_is_counted() {
+        let before = children_cpu_ms().expect("getrusage answers on Unix");
+        let t = Instant::now();
+        let status = Command::new("sh")
+            .args(["-c", "i=0; while [ $i -lt 300000 ]; do i=$((i+1)); done"])
+            .status()
+            .expect("sh runs");
+        let wall = t.elapsed().as_secs_f64() * 1e3;
+        assert!(status.success());
+        let cpu = children_cpu_ms().expect("getrusage answers on Unix") - before;
+        assert!(
+            cpu > 10.0,
+            "a busy loop of {wall:.0} ms spent {cpu:.1} ms of CPU"
+        );
+        assert!(
+            cpu <= wall + 10.0,
+            "{cpu:.1} ms of CPU in {wall:.1} ms of wall time"
+        );
+    }
 }
