@@ -397,6 +397,7 @@ fn flipped_toward(n: Vec3, d: Vec3) -> Vec3 {
 
 /// The bump-perturbed shading normal, flipped toward the viewer first.
 #[must_use]
+#[inline(always)]
 pub(crate) fn shading_normal(m: &Material, sp: &SurfacePoint, d: Vec3) -> Vec3 {
     let mut n = sp.ns;
     if n.dot(d) > 0.0 {

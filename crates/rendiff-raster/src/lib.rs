@@ -727,7 +727,9 @@ fn push_snapped(
 }
 
 /// Records a snapped triangle if it can cover a sample; true when it is a
-/// back face culled.
+/// back face culled. (Inlined, as `triangle_planes`: see ARCHITECTURE.md,
+/// "The per-sample chain inlined".)
+#[inline(always)]
 fn record_snapped(
     s: [(i64, i64); 3],
     tri: u32,
@@ -765,6 +767,7 @@ fn record_snapped(
 /// The planes `λ_i = b_i/w` (2-D homogeneous rasterization, Olano & Greer
 /// 1997) and the depth plane of triangle `tri`, relative to `(ax, ay)`;
 /// `None` when the triangle's plane passes through the eye.
+#[inline(always)]
 fn triangle_planes(v: &[HVert; 3], perspective: bool, ax: f64, ay: f64) -> Option<Planes> {
     // Columns h_i = (X_i·w_i, Y_i·w_i, w_i); λ = M⁻¹·(X, Y, 1). The rows of
     // M⁻¹ are (h1 × h2, h2 × h0, h0 × h1) / det.
