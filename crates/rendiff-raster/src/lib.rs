@@ -42,7 +42,7 @@ use rendiff_core::huge::Big;
 use rendiff_core::math::{DVec3, to_f64};
 use rendiff_core::options::{DepthFormat, ShadowMode};
 use rendiff_core::shade::{self, Unoccluded, Visibility};
-use rendiff_core::tri_scene::{TriConsts, TriScene};
+use rendiff_core::tri_scene::TriScene;
 
 pub use rendiff_core::coverage::DEPTH_DRIFT_REL;
 
@@ -1199,14 +1199,13 @@ fn shade_pass(
                 // The weights the ray tracer shades with: the f64 camera
                 // ray of this sample against the visible triangle.
                 let ray64 = cam_rays.ray(sx, sy);
-                // (A triangle this sample alone sees is not kept: a mesh
-                // finer than the samples would only pay for the copy.)
-                let kept = last.as_ref().is_some_and(|c: &TriConsts| c.tri() == tri);
-                let (sp, p64) = if kept || (sx + 1 < sw && ids[i + 1] == tri) {
-                    scene.view_surface_after(&mut last, tri, ray64.origin, ray64.dir)
-                } else {
-                    scene.view_surface(tri, ray64.origin, ray64.dir)
-                };
+                // Every sample through the kept parts, even where its
+                // triangle is its own alone (most of a mesh finer than the
+                // samples): one inlined copy of the shading inputs instead
+                // of two made the 940 k bunny's frame 4 % faster and the
+                // bundled scenes' 5–12 % (ARCHITECTURE.md, "One path for the
+                // raster's shading inputs").
+                let (sp, p64) = scene.view_surface_after(&mut last, tri, ray64.origin, ray64.dir);
                 let ray = ray64.to_f32();
                 let depth = cam.frame_depth(p64);
                 let Some(r) = &rays else {
