@@ -306,8 +306,11 @@ impl Visibility for Unoccluded {
 /// Moves a point off its surface along ±`ng`, toward the side `dir` leaves
 /// on, by more than the point's floating-point error (pbrt-v4's
 /// `OffsetRayOrigin`): a ray spawned there cannot re-hit the surface it
-/// left, at any scene scale.
+/// left, at any scene scale. (Inlined: its result feeds the shadow ray's
+/// direction at once, and as a call it cost the shadowed bundled scenes
+/// 2–5 % of their render.)
 #[must_use]
+#[inline(always)]
 pub fn offset_origin(p: Vec3, p_error: Vec3, ng: Vec3, dir: Vec3) -> Vec3 {
     let d = ng.abs().dot(p_error);
     let mut offset = ng * d;
