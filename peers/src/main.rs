@@ -44,7 +44,10 @@
 //! in scanline order, and in 4×2 blocks (our packets, `Accel::intersect_packets`)
 //! against `rtcIntersect8`; one
 //! shadow ray from every visible point against `rtcOccluded1`; on one
-//! thread and on all; the BVH builds timed too; the hits compared.
+//! thread and on all; the BVH builds timed too; the hits compared; on
+//! one thread, the primary rays that hit and those that miss timed apart,
+//! and the hitting rays again each four times in a row (caches and branch
+//! predictors warm for the repeats: whether the gap is memory or work).
 //!
 //! `llvmpipe`: the rasterizer's shaded frame of the same bunny against
 //! Mesa's llvmpipe on one thread (see `llvmpipe.rs`).
@@ -631,12 +634,53 @@ fn embree_cmp(scene: &Path, subdivide: u32, build: BvhBuild, repeats: usize) -> 
                 embree_build_ms: embree_build,
             };
             agreement(&rays, &accel, &emb);
+            hits_and_misses(&p, repeats, &rays, &accel, &emb);
         }
     }
     Ok(figures)
 }
 
-/// Primary rays that hit, ours one at a time, in parallel runs.
+/// The primary rays that hit and those that miss, timed apart (ours one
+/// at a time against `rtcIntersect1`), and the hitting rays again with
+/// each traced four times in a row, so that the repeats find the caches
+/// and branch predictors warm: where the gap between the two lies, and
+/// whether it is memory or work.
+fn hits_and_misses(
+    p: &rayon::ThreadPool,
+    repeats: usize,
+    rays: &[Ray64],
+    accel: &Accel<'_>,
+    emb: &embree::EmbreeScene,
+) {
+    let (hit, miss): (Vec<Ray64>, Vec<Ray64>) =
+        rays.iter().partition(|r| accel.intersect(r).is_some());
+    let warm: Vec<Ray64> = hit.iter().flat_map(|r| [*r; 4]).collect();
+    for (what, set) in [
+        ("that hit", &hit),
+        ("that miss", &miss),
+        ("that hit, each 4 times in a row", &warm),
+    ] {
+        let ours = time_ms(p, repeats, &|| {
+            std::hint::black_box(ours_primary(accel, set));
+        });
+        let theirs = time_ms(p, repeats, &|| {
+            std::hint::black_box(embree_primary(emb, set));
+        });
+        let ns = |ms: f64| ms * 1e6 / set.len().max(1) as f64;
+        println!(
+            "  primary rays {what} ({}): ours {:.1} ns/ray, Embree {:.1} ns/ray; ours is {:.2}x Embree's speed",
+            set.len(),
+            ns(ours),
+            ns(theirs),
+            theirs / ours
+        );
+    }
+}
+
+/// Primary rays that hit, ours one at a time, in parallel runs (never
+/// inlined: a symbol for callgrind's `--toggle-collect`, as the other
+/// `ours_` and `embree_` passes).
+#[inline(never)]
 fn ours_primary(accel: &Accel<'_>, rays: &[Ray64]) -> usize {
     rays.par_chunks(4096)
         .map(|c| c.iter().filter(|r| accel.intersect(r).is_some()).count())
@@ -644,6 +688,7 @@ fn ours_primary(accel: &Accel<'_>, rays: &[Ray64]) -> usize {
 }
 
 /// The same with Embree's `rtcIntersect1` (the rays rounded to f32).
+#[inline(never)]
 fn embree_primary(emb: &embree::EmbreeScene, rays: &[Ray64]) -> usize {
     rays.par_chunks(4096)
         .map(|c| {
@@ -658,6 +703,7 @@ fn embree_primary(emb: &embree::EmbreeScene, rays: &[Ray64]) -> usize {
 }
 
 /// Primary rays that hit, ours in packets of a 4×2 block each.
+#[inline(never)]
 fn ours_packets(accel: &Accel<'_>, blocks: &[Vec<Ray64>]) -> usize {
     blocks
         .par_chunks(512)
@@ -691,6 +737,7 @@ fn embree_packets(emb: &embree::EmbreeScene, blocks: &[Vec<Ray64>]) -> usize {
 
 /// Shadow queries blocked, ours (`transmittance_packets`, eight
 /// neighbours at a time), in parallel runs.
+#[inline(never)]
 fn ours_blocked(vis: &ShadowRays<'_, '_>, shadow: &[rendiff::shade::ShadowQuery]) -> usize {
     shadow
         .par_chunks(4096)

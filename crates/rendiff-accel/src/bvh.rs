@@ -1523,7 +1523,6 @@ impl Bvh {
         let walk = WalkRay::new(ray, self.reach(ray));
         let mut t_prune = walk.ray.t_max;
         let mut leaf = ClosestLeaf {
-            bvh: self,
             ray,
             walk: &walk,
             pre: None,
@@ -1540,7 +1539,6 @@ impl Bvh {
         let walk = WalkRay::new(ray, self.reach(ray));
         let mut t_prune = walk.ray.t_max;
         let mut leaf = EachLeaf {
-            bvh: self,
             ray,
             walk: &walk,
             pre: None,
@@ -1686,10 +1684,17 @@ impl Bvh {
             return;
         }
         if self.root & LEAF != 0 {
-            leaf.visit((self.root & !LEAF) as usize, t_max);
+            leaf.visit(self.leaf_arrays(), (self.root & !LEAF) as usize, t_max);
             return;
         }
-        self.traverse_from(self.root, &Slab::new(walk), t_max, ordered, leaf);
+        self.traverse_from(
+            (&self.nodes, self.leaf_arrays()),
+            self.root,
+            &Slab::new(walk),
+            t_max,
+            ordered,
+            leaf,
+        );
     }
 
     /// The stack a walk below a node needs: a visit pops one entry and
@@ -1704,6 +1709,7 @@ impl Bvh {
     #[inline(always)]
     fn traverse_from(
         &self,
+        (nodes, arrays): (&[Node], LeafArrays<'_>),
         start: u32,
         slab: &Slab,
         t_max: &mut f32,
@@ -1712,7 +1718,6 @@ impl Bvh {
     ) {
         let grow = Slab::GROW;
         debug_assert!(start & LEAF == 0, "the walk starts at an inner node");
-        let nodes: &[Node] = &self.nodes;
         // The start node first: a ray that enters none of its children
         // (most camera rays of a small object) sets up no stack.
         let n = &nodes[start as usize];
@@ -1732,7 +1737,7 @@ impl Bvh {
         let mut node = n.child[near];
         loop {
             if node & LEAF != 0 {
-                if leaf.visit((node & !LEAF) as usize, t_max) {
+                if leaf.visit(arrays, (node & !LEAF) as usize, t_max) {
                     return;
                 }
             } else {
@@ -1834,9 +1839,11 @@ impl Bvh {
         let mut t_prune = [first.ray.t_max; PACKET];
         self.packet_rays(rays, n, (&mut walks, &mut slabs, &mut t_prune));
         let nodes: &[Node] = &self.nodes;
+        // Taken at the first leaf or lone ray: most packets of a small
+        // object's frame meet none (two `Big` derefs saved).
+        let mut arrays: Option<LeafArrays<'_>> = None;
         let mut wide = (self.depth >= PACKET_TEST_DEPTH).then(|| PacketSlab::new(&slabs, &t_prune));
         let mut leaves: [ClosestLeaf<'_>; PACKET] = std::array::from_fn(|i| ClosestLeaf {
-            bvh: self,
             ray: ray_of(i),
             walk: &walks[i],
             pre: None,
@@ -1853,14 +1860,23 @@ impl Bvh {
         let mut active: u32 = (1 << n) - 1;
         'walk: loop {
             if node & LEAF == 0 && active.count_ones() <= SOLO {
+                let arrays = *arrays.get_or_insert_with(|| self.leaf_arrays());
                 let mut m = active;
                 while m != 0 {
                     let r = m.trailing_zeros() as usize;
                     m &= m - 1;
-                    self.traverse_from(node, &slabs[r], &mut t_prune[r], true, &mut leaves[r]);
+                    self.traverse_from(
+                        (nodes, arrays),
+                        node,
+                        &slabs[r],
+                        &mut t_prune[r],
+                        true,
+                        &mut leaves[r],
+                    );
                 }
             } else if node & LEAF != 0 {
                 let first = (node & !LEAF) as usize;
+                let arrays = *arrays.get_or_insert_with(|| self.leaf_arrays());
                 let mut m = active;
                 while m != 0 {
                     let r = m.trailing_zeros() as usize;
@@ -1873,13 +1889,13 @@ impl Bvh {
                             && a.precomp().k == b.precomp().k
                         {
                             m &= m - 1;
-                            ClosestLeaf::visit_pair([a, b], first);
+                            ClosestLeaf::visit_pair([a, b], arrays, first);
                             t_prune[r] = f32_at_least(a.best_t);
                             t_prune[r2] = f32_at_least(b.best_t);
                             continue;
                         }
                     }
-                    leaves[r].visit(first, &mut t_prune[r]);
+                    leaves[r].visit(arrays, first, &mut t_prune[r]);
                 }
             } else {
                 let nd = &nodes[node as usize];
@@ -2049,7 +2065,6 @@ impl Bvh {
                     m &= m - 1;
                     let mut stopped = false;
                     let mut leaf = EachLeaf {
-                        bvh: self,
                         ray: ray_of(r),
                         walk: &walks[r],
                         pre: pres[r].take(),
@@ -2060,7 +2075,14 @@ impl Bvh {
                             stopped
                         },
                     };
-                    self.traverse_from(node, &slabs[r], &mut t_prune[r], false, &mut leaf);
+                    self.traverse_from(
+                        (nodes, arrays),
+                        node,
+                        &slabs[r],
+                        &mut t_prune[r],
+                        false,
+                        &mut leaf,
+                    );
                     pres[r] = leaf.pre;
                     if stopped {
                         alive &= !(1 << r);
@@ -2214,9 +2236,11 @@ fn rays_by_child(by_ray: u64) -> (u32, [u32; WIDTH]) {
 /// instruction set of the copy it is called from (it ran the triangle
 /// tests of the x86-64-v3 walk on SSE2 code, 20 % of a primary ray).
 trait Leaf {
-    /// Tests the leaf starting at pack `first`; may shrink `t_max`;
+    /// Tests the leaf starting at pack `first` of `arrays` (the tree's
+    /// [`Bvh::leaf_arrays`], taken once per walk: each `Big` deref checks
+    /// its form and casts, about 17 instructions); may shrink `t_max`;
     /// `true` stops the walk.
-    fn visit(&mut self, first: usize, t_max: &mut f32) -> bool;
+    fn visit(&mut self, arrays: LeafArrays<'_>, first: usize, t_max: &mut f32) -> bool;
 }
 
 /// A ray's triangle-test constants, formed at its first leaf, and its
@@ -2228,7 +2252,6 @@ type LeafArrays<'a> = (&'a [TriPack], &'a [u32]);
 
 /// The leaf test of a closest-hit query: the best hit so far.
 struct ClosestLeaf<'a> {
-    bvh: &'a Bvh,
     ray: &'a Ray64,
     walk: &'a WalkRay,
     /// The triangle test's constants, formed at the first leaf.
@@ -2239,14 +2262,14 @@ struct ClosestLeaf<'a> {
 
 impl Leaf for ClosestLeaf<'_> {
     #[inline(always)]
-    fn visit(&mut self, first: usize, t_prune: &mut f32) -> bool {
+    fn visit(&mut self, arrays: LeafArrays<'_>, first: usize, t_prune: &mut f32) -> bool {
         let (ray, walk) = (self.ray, self.walk);
         let (pre, shear) = self
             .pre
             .get_or_insert_with(|| (RayPrecomp::of::<false>(ray, walk), None));
         let best = &mut self.best;
         Bvh::leaf_hits::<false>(
-            self.bvh.leaf_arrays(),
+            arrays,
             (pre, shear),
             first,
             (ray.t_min, NO_SKIP),
@@ -2287,9 +2310,8 @@ impl ClosestLeaf<'_> {
     /// is no triangle's id: there is no skip test here). The caller sets
     /// the rays' `f32` pruning bounds afterwards, as `visit` does.
     #[inline(always)]
-    fn visit_pair(leaves: [&mut Self; 2], first: usize) {
+    fn visit_pair(leaves: [&mut Self; 2], (packs, ids): LeafArrays<'_>, first: usize) {
         let [a, b] = leaves;
-        let (packs, ids) = a.bvh.leaf_arrays();
         let (ray_a, walk_a) = (a.ray, a.walk);
         let (ray_b, walk_b) = (b.ray, b.walk);
         let (pa, sa) = a
@@ -2326,7 +2348,6 @@ impl ClosestLeaf<'_> {
 
 /// The leaf test of an every-hit query: the caller's visitor.
 struct EachLeaf<'a, F> {
-    bvh: &'a Bvh,
     ray: &'a Ray64,
     walk: &'a WalkRay,
     /// The triangle test's constants, formed at the first leaf.
@@ -2339,14 +2360,14 @@ struct EachLeaf<'a, F> {
 
 impl<F: FnMut(u32, TriHit) -> bool> Leaf for EachLeaf<'_, F> {
     #[inline(always)]
-    fn visit(&mut self, first: usize, _: &mut f32) -> bool {
+    fn visit(&mut self, arrays: LeafArrays<'_>, first: usize, _: &mut f32) -> bool {
         let (ray, walk) = (self.ray, self.walk);
         let (pre, shear) = self
             .pre
             .get_or_insert_with(|| (RayPrecomp::of::<true>(ray, walk), None));
         let visit = &mut self.visit;
         Bvh::leaf_hits::<true>(
-            self.bvh.leaf_arrays(),
+            arrays,
             (pre, shear),
             first,
             (ray.t_min, self.skip),
