@@ -2423,11 +2423,8 @@ fn push_children(
     sp: &mut usize,
 ) -> u32 {
     let entry = |k: usize| (u64::from(tn[k].to_bits()) << 32) | u64::from(child[k]);
-    let t_of = |e: u64| {
-        #[expect(clippy::cast_possible_truncation, reason = "the high half")]
-        let bits = (e >> 32) as u32;
-        f32::from_bits(bits)
-    };
+    // The high half (a shift by 32 leaves 32 bits: no truncation).
+    let t_of = |e: u64| f32::from_bits((e >> 32) as u32);
     let mut near = mask.trailing_zeros() as usize;
     mask &= mask - 1;
     let first = *sp;
