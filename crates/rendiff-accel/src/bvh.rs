@@ -1729,7 +1729,20 @@ impl Bvh {
         let mut stack = Stack::<u64>::default();
         let stack = stack.slice(self.stack_need());
         let mut sp = 0usize;
-        let mut node = push_children(mask, &tn, &n.child, ordered, stack, &mut sp);
+        // The high half of an entry (a shift by 32 leaves 32 bits).
+        let t_of = |e: u64| f32::from_bits((e >> 32) as u32);
+        let entry = |n: &Node, tn: &[f32; WIDTH], k: usize| {
+            (u64::from(tn[k].to_bits()) << 32) | u64::from(n.child[k])
+        };
+        let near = push_children(
+            mask,
+            &tn,
+            ordered,
+            (stack, &mut sp),
+            |k| entry(n, &tn, k),
+            t_of,
+        );
+        let mut node = n.child[near];
         loop {
             if node & LEAF != 0 {
                 if leaf.visit(arrays, (node & !LEAF) as usize, t_max) {
@@ -1739,7 +1752,15 @@ impl Bvh {
                 let n = &nodes[node as usize];
                 let (mask, tn) = slab.test(n, *t_max);
                 if mask != 0 {
-                    node = push_children(mask, &tn, &n.child, ordered, stack, &mut sp);
+                    let near = push_children(
+                        mask,
+                        &tn,
+                        ordered,
+                        (stack, &mut sp),
+                        |k| entry(n, &tn, k),
+                        t_of,
+                    );
+                    node = n.child[near];
                     continue;
                 }
             }
@@ -1932,11 +1953,14 @@ impl Bvh {
                     (mask, rays_of) = rays_by_child(by_ray);
                 }
                 if mask != 0 {
-                    let (near, rest, m) = order_children(mask, &key, true);
-                    for &k in &rest[..m] {
-                        stack[sp] = (nd.child[k], rays_of[k], key[k]);
-                        sp += 1;
-                    }
+                    let near = push_children(
+                        mask,
+                        &key,
+                        true,
+                        (stack, &mut sp),
+                        |k| (nd.child[k], rays_of[k], key[k]),
+                        |e| e.2,
+                    );
                     node = nd.child[near];
                     active = rays_of[near];
                     continue;
@@ -2407,24 +2431,22 @@ impl<T: Copy + Default> Stack<T> {
 
 /// Pushes a node's hit children (`mask`, their `t_near` in `tn`) but the
 /// one the walk descends into onto `stack` from `sp`, as the walk's
-/// entries (`t_near` bits << 32 | child), and returns that one's child
-/// entry. With `ordered` it is the nearest (the first of the least) and
-/// the pushed entries are sorted far to near, so that the nearest is
-/// popped first; without, it is the lowest lane and the rest are pushed
-/// by lane. Written straight onto the stack (an array of the rest,
-/// returned and copied, cost about 15 instructions a node).
+/// entries (`entry(k)` of child `k`, whose `t_near` `t_of` reads back),
+/// and returns that one's lane. With `ordered` it is the nearest (the
+/// first of the least) and the pushed entries are sorted far to near, so
+/// that the nearest is popped first; without, it is the lowest lane and
+/// the rest are pushed by lane. Written straight onto the stack (an array
+/// of the rest, returned and copied, cost the single-ray walk about 15
+/// instructions a node).
 #[inline(always)]
-fn push_children(
+fn push_children<E: Copy>(
     mut mask: u32,
     tn: &[f32; WIDTH],
-    child: &[u32; WIDTH],
     ordered: bool,
-    stack: &mut [u64],
-    sp: &mut usize,
-) -> u32 {
-    let entry = |k: usize| (u64::from(tn[k].to_bits()) << 32) | u64::from(child[k]);
-    // The high half (a shift by 32 leaves 32 bits: no truncation).
-    let t_of = |e: u64| f32::from_bits((e >> 32) as u32);
+    (stack, sp): (&mut [E], &mut usize),
+    entry: impl Fn(usize) -> E,
+    t_of: impl Fn(E) -> f32,
+) -> usize {
     let mut near = mask.trailing_zeros() as usize;
     mask &= mask - 1;
     let first = *sp;
@@ -2449,45 +2471,7 @@ fn push_children(
             }
         }
     }
-    child[near]
-}
-
-/// The order a node's hit children (`mask`, their `t_near` in `tn`) are
-/// visited in: the one descended into, and the rest in the order they are
-/// pushed (far to near with `ordered`, so the nearest is popped first; as
-/// they come without).
-#[inline(always)]
-fn order_children(
-    mut mask: u32,
-    tn: &[f32; WIDTH],
-    ordered: bool,
-) -> (usize, [usize; WIDTH - 1], usize) {
-    let mut near = mask.trailing_zeros() as usize;
-    mask &= mask - 1;
-    let mut rest = [0usize; WIDTH - 1];
-    let mut m = 0;
-    while mask != 0 {
-        let k = mask.trailing_zeros() as usize;
-        mask &= mask - 1;
-        if ordered && tn[k] < tn[near] {
-            rest[m] = near;
-            near = k;
-        } else {
-            rest[m] = k;
-        }
-        m += 1;
-    }
-    if ordered {
-        // Descending t_near: the nearest of the rest is popped first.
-        for a in 1..m {
-            let mut b = a;
-            while b > 0 && tn[rest[b - 1]] < tn[rest[b]] {
-                rest.swap(b - 1, b);
-                b -= 1;
-            }
-        }
-    }
-    (near, rest, m)
+    near
 }
 
 /// A packet closest-hit query as a `pulp` operation (see [`Closest`]).
