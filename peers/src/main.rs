@@ -750,6 +750,7 @@ fn ours_blocked(vis: &ShadowRays<'_, '_>, shadow: &[rendiff::shade::ShadowQuery]
 }
 
 /// The same with Embree's `rtcOccluded1`.
+#[inline(never)]
 fn embree_blocked(emb: &embree::EmbreeScene, shadow: &[rendiff::shade::ShadowQuery]) -> usize {
     shadow
         .par_chunks(4096)
