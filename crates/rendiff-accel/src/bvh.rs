@@ -1674,8 +1674,9 @@ impl Bvh {
         }
     }
 
-    /// Walks the tree; `leaf.visit(first_pack, t_max)` tests a leaf and may
-    /// shrink `t_max`; returning `true` stops the walk. With `ordered`,
+    /// Walks the tree; `leaf.visit(arrays, first_pack, t_max)` tests a leaf
+    /// (of the tree's [`Bvh::leaf_arrays`], taken once) and may shrink
+    /// `t_max`; returning `true` stops the walk. With `ordered`,
     /// children are visited nearest first (closest hit); without, in any
     /// order (any hit, all hits).
     #[inline(always)]
@@ -1705,7 +1706,9 @@ impl Bvh {
         (WIDTH - 1) * self.depth as usize + 1
     }
 
-    /// [`Bvh::traverse`] below the inner node `start`.
+    /// [`Bvh::traverse`] below the inner node `start`, on the tree's
+    /// nodes and leaf arrays as its caller took them (once per walk or
+    /// packet: each `Big` deref checks its form and casts).
     #[inline(always)]
     fn traverse_from(
         &self,
