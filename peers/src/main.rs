@@ -660,13 +660,16 @@ fn hits_and_misses(
         ("that miss", &miss),
         ("that hit, each 4 times in a row", &warm),
     ] {
+        if set.is_empty() {
+            continue;
+        }
         let ours = time_ms(p, repeats, &|| {
             std::hint::black_box(ours_primary(accel, set));
         });
         let theirs = time_ms(p, repeats, &|| {
             std::hint::black_box(embree_primary(emb, set));
         });
-        let ns = |ms: f64| ms * 1e6 / set.len().max(1) as f64;
+        let ns = |ms: f64| ms * 1e6 / set.len() as f64;
         println!(
             "  primary rays {what} ({}): ours {:.1} ns/ray, Embree {:.1} ns/ray; ours is {:.2}x Embree's speed",
             set.len(),

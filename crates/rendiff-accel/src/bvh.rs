@@ -1732,20 +1732,7 @@ impl Bvh {
         let mut stack = Stack::<u64>::default();
         let stack = stack.slice(self.stack_need());
         let mut sp = 0usize;
-        // The high half of an entry (a shift by 32 leaves 32 bits).
-        let t_of = |e: u64| f32::from_bits((e >> 32) as u32);
-        let entry = |n: &Node, tn: &[f32; WIDTH], k: usize| {
-            (u64::from(tn[k].to_bits()) << 32) | u64::from(n.child[k])
-        };
-        let near = push_children(
-            mask,
-            &tn,
-            ordered,
-            (stack, &mut sp),
-            |k| entry(n, &tn, k),
-            t_of,
-        );
-        let mut node = n.child[near];
+        let mut node = descend(n, mask, &tn, ordered, (stack, &mut sp));
         loop {
             if node & LEAF != 0 {
                 if leaf.visit(arrays, (node & !LEAF) as usize, t_max) {
@@ -1755,15 +1742,7 @@ impl Bvh {
                 let n = &nodes[node as usize];
                 let (mask, tn) = slab.test(n, *t_max);
                 if mask != 0 {
-                    let near = push_children(
-                        mask,
-                        &tn,
-                        ordered,
-                        (stack, &mut sp),
-                        |k| entry(n, &tn, k),
-                        t_of,
-                    );
-                    node = n.child[near];
+                    node = descend(n, mask, &tn, ordered, (stack, &mut sp));
                     continue;
                 }
             }
@@ -2430,6 +2409,24 @@ impl<T: Copy + Default> Stack<T> {
             &mut self.big
         }
     }
+}
+
+/// The single-ray walk's [`push_children`]: its entries are `t_near` bits
+/// << 32 | child, and it returns the child entry descended into. (A
+/// function, not a closure: a closure called from two places is compiled
+/// out of line, without the instruction set of its caller.)
+#[inline(always)]
+fn descend(
+    n: &Node,
+    mask: u32,
+    tn: &[f32; WIDTH],
+    ordered: bool,
+    stack: (&mut [u64], &mut usize),
+) -> u32 {
+    let entry = |k: usize| (u64::from(tn[k].to_bits()) << 32) | u64::from(n.child[k]);
+    // The high half (a shift by 32 leaves 32 bits).
+    let t_of = |e: u64| f32::from_bits((e >> 32) as u32);
+    n.child[push_children(mask, tn, ordered, stack, entry, t_of)]
 }
 
 /// Pushes a node's hit children (`mask`, their `t_near` in `tn`) but the
