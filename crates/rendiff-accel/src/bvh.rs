@@ -96,6 +96,16 @@ pub(crate) struct Node {
     pad: [u32; 7],
 }
 
+impl Node {
+    /// The six plane arrays in their order (`min_x`, `max_x`, `min_y`,
+    /// `max_y`, `min_z`, `max_z`), then `child` and `used` with `pad`, as
+    /// bits.
+    #[inline(always)]
+    fn planes(&self) -> &[[f32; WIDTH]; 8] {
+        bytemuck::cast_ref(self)
+    }
+}
+
 /// The BVH: nodes and triangle data in leaf order.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct Bvh {
@@ -1519,7 +1529,7 @@ impl Bvh {
 
     /// [`Bvh::intersect`], compiled into each instruction set's copy.
     #[inline(always)]
-    fn closest(&self, ray: &Ray64) -> Option<BvhHit> {
+    fn closest(&self, boxes: Boxes, ray: &Ray64) -> Option<BvhHit> {
         let walk = WalkRay::new(ray, self.reach(ray));
         let mut t_prune = walk.ray.t_max;
         let mut leaf = ClosestLeaf {
@@ -1529,13 +1539,19 @@ impl Bvh {
             best: None,
             best_t: ray.t_max,
         };
-        self.traverse(&walk, &mut t_prune, true, &mut leaf);
+        self.traverse(boxes, &walk, &mut t_prune, true, &mut leaf);
         leaf.best
     }
 
     /// [`Bvh::for_each_hit`], compiled into each instruction set's copy.
     #[inline(always)]
-    fn each_hit(&self, ray: &Ray64, skip: u32, visit: impl FnMut(u32, TriHit) -> bool) {
+    fn each_hit(
+        &self,
+        boxes: Boxes,
+        ray: &Ray64,
+        skip: u32,
+        visit: impl FnMut(u32, TriHit) -> bool,
+    ) {
         let walk = WalkRay::new(ray, self.reach(ray));
         let mut t_prune = walk.ray.t_max;
         let mut leaf = EachLeaf {
@@ -1546,7 +1562,7 @@ impl Bvh {
             skip,
             visit,
         };
-        self.traverse(&walk, &mut t_prune, false, &mut leaf);
+        self.traverse(boxes, &walk, &mut t_prune, false, &mut leaf);
     }
 
     /// Tests the leaf starting at pack `first`: four triangles at a time
@@ -1680,7 +1696,14 @@ impl Bvh {
     /// children are visited nearest first (closest hit); without, in any
     /// order (any hit, all hits).
     #[inline(always)]
-    fn traverse(&self, walk: &WalkRay, t_max: &mut f32, ordered: bool, leaf: &mut impl Leaf) {
+    fn traverse(
+        &self,
+        boxes: Boxes,
+        walk: &WalkRay,
+        t_max: &mut f32,
+        ordered: bool,
+        leaf: &mut impl Leaf,
+    ) {
         if self.root == EMPTY {
             return;
         }
@@ -1691,7 +1714,7 @@ impl Bvh {
         self.traverse_from(
             (&self.nodes, self.leaf_arrays()),
             self.root,
-            &Slab::new(walk),
+            (boxes, &Slab::new(walk)),
             t_max,
             ordered,
             leaf,
@@ -1714,7 +1737,7 @@ impl Bvh {
         &self,
         (nodes, arrays): (&[Node], LeafArrays<'_>),
         start: u32,
-        slab: &Slab,
+        (boxes, slab): (Boxes, &Slab),
         t_max: &mut f32,
         ordered: bool,
         leaf: &mut impl Leaf,
@@ -1723,8 +1746,9 @@ impl Bvh {
         debug_assert!(start & LEAF == 0, "the walk starts at an inner node");
         // The start node first: a ray that enters none of its children
         // (most camera rays of a small object) sets up no stack.
+        let planes = Planes::of(slab);
         let n = &nodes[start as usize];
-        let (mask, tn) = slab.test(n, *t_max);
+        let (mask, tn) = slab.test((boxes, &planes), n, *t_max);
         if mask == 0 {
             return;
         }
@@ -1740,7 +1764,7 @@ impl Bvh {
                 }
             } else {
                 let n = &nodes[node as usize];
-                let (mask, tn) = slab.test(n, *t_max);
+                let (mask, tn) = slab.test((boxes, &planes), n, *t_max);
                 if mask != 0 {
                     node = descend(n, mask, &tn, ordered, (stack, &mut sp));
                     continue;
@@ -1817,11 +1841,11 @@ impl Bvh {
     /// the least (distance, id) over the triangles it tested, whatever the
     /// order it tested them in.
     #[inline(always)]
-    fn closest_packet(&self, rays: &[Ray64], out: &mut [Option<BvhHit>]) {
+    fn closest_packet(&self, boxes: Boxes, rays: &[Ray64], out: &mut [Option<BvhHit>]) {
         let n = rays.len().min(out.len()).min(PACKET);
         if n <= 1 || self.root == EMPTY || self.root & LEAF != 0 {
             for (o, r) in out.iter_mut().zip(rays) {
-                *o = self.closest(r);
+                *o = self.closest(boxes, r);
             }
             return;
         }
@@ -1835,7 +1859,13 @@ impl Bvh {
         // Taken at the first leaf or lone ray: most packets of a small
         // object's frame meet none (two `Big` derefs saved).
         let mut arrays: Option<LeafArrays<'_>> = None;
-        let mut wide = (self.depth >= PACKET_TEST_DEPTH).then(|| PacketSlab::new(&slabs, &t_prune));
+        // (An `if`, not `bool::then`: its closure was compiled out of
+        // line, without the instruction set, once the walk grew.)
+        let mut wide = if self.depth >= PACKET_TEST_DEPTH {
+            Some(PacketSlab::new(&slabs, &t_prune))
+        } else {
+            None
+        };
         let mut leaves: [ClosestLeaf<'_>; PACKET] = std::array::from_fn(|i| ClosestLeaf {
             ray: ray_of(i),
             walk: &walks[i],
@@ -1861,7 +1891,7 @@ impl Bvh {
                     self.traverse_from(
                         (nodes, arrays),
                         node,
-                        &slabs[r],
+                        (boxes, &slabs[r]),
                         &mut t_prune[r],
                         true,
                         &mut leaves[r],
@@ -1921,7 +1951,7 @@ impl Bvh {
                     while m != 0 {
                         let r = m.trailing_zeros() as usize;
                         m &= m - 1;
-                        let (ray_mask, tn) = slabs[r].test(nd, t_prune[r]);
+                        let (ray_mask, tn) = slabs[r].test_lanes(nd, t_prune[r]);
                         by_ray |= u64::from(ray_mask) << (8 * r);
                         for k in 0..WIDTH {
                             let hit = (ray_mask >> k) & 1;
@@ -2017,6 +2047,7 @@ impl Bvh {
     #[inline(always)]
     fn any_packet8(
         &self,
+        boxes: Boxes,
         rays: &[Ray64],
         skips: &[u32],
         out: &mut [bool],
@@ -2026,7 +2057,7 @@ impl Bvh {
         if n <= 1 || self.root == EMPTY || self.root & LEAF != 0 {
             for (r, (o, ray)) in out.iter_mut().zip(rays).enumerate() {
                 let mut hit = false;
-                self.each_hit(ray, skips[r], |id, h| {
+                self.each_hit(boxes, ray, skips[r], |id, h| {
                     hit = accept(r, id, h);
                     hit
                 });
@@ -2043,7 +2074,11 @@ impl Bvh {
         let nodes: &[Node] = &self.nodes;
         let arrays = self.leaf_arrays();
         // (An any-hit walk's bounds stay the rays' own.)
-        let wide = (self.depth >= PACKET_TEST_DEPTH).then(|| PacketSlab::new(&slabs, &t_prune));
+        let wide = if self.depth >= PACKET_TEST_DEPTH {
+            Some(PacketSlab::new(&slabs, &t_prune))
+        } else {
+            None
+        };
         let mut pres: [Option<Precomp>; PACKET] = [None; PACKET];
         // Entries: (child, the mask of its rays).
         let mut stack = Stack::<(u32, u32)>::default();
@@ -2074,7 +2109,7 @@ impl Bvh {
                     self.traverse_from(
                         (nodes, arrays),
                         node,
-                        &slabs[r],
+                        (boxes, &slabs[r]),
                         &mut t_prune[r],
                         false,
                         &mut leaf,
@@ -2161,7 +2196,7 @@ impl Bvh {
                     while m != 0 {
                         let r = m.trailing_zeros() as usize;
                         m &= m - 1;
-                        let (mask, _) = slabs[r].test(nd, t_prune[r]);
+                        let (mask, _) = slabs[r].test_lanes(nd, t_prune[r]);
                         by_ray |= u64::from(mask) << (8 * r);
                     }
                     rays_by_child(by_ray)
@@ -2485,8 +2520,9 @@ impl WithSimd for ClosestPacket<'_> {
     type Output = ();
 
     #[inline(always)]
-    fn with_simd<S: pulp::Simd>(self, _: S) {
-        self.bvh.closest_packet(self.rays, self.out);
+    fn with_simd<S: pulp::Simd>(self, simd: S) {
+        self.bvh
+            .closest_packet(Boxes::of(simd), self.rays, self.out);
     }
 }
 
@@ -2503,9 +2539,14 @@ impl<F: FnMut(usize, u32, TriHit) -> bool> WithSimd for AnyPacket<'_, F> {
     type Output = ();
 
     #[inline(always)]
-    fn with_simd<S: pulp::Simd>(self, _: S) {
-        self.bvh
-            .any_packet8(self.rays, self.skips, self.out, self.accept);
+    fn with_simd<S: pulp::Simd>(self, simd: S) {
+        self.bvh.any_packet8(
+            Boxes::of(simd),
+            self.rays,
+            self.skips,
+            self.out,
+            self.accept,
+        );
     }
 }
 
@@ -2520,8 +2561,8 @@ impl WithSimd for Closest<'_> {
     type Output = Option<BvhHit>;
 
     #[inline(always)]
-    fn with_simd<S: pulp::Simd>(self, _: S) -> Self::Output {
-        self.bvh.closest(self.ray)
+    fn with_simd<S: pulp::Simd>(self, simd: S) -> Self::Output {
+        self.bvh.closest(Boxes::of(simd), self.ray)
     }
 }
 
@@ -2537,8 +2578,9 @@ impl<F: FnMut(u32, TriHit) -> bool> WithSimd for EachHit<'_, F> {
     type Output = ();
 
     #[inline(always)]
-    fn with_simd<S: pulp::Simd>(self, _: S) {
-        self.bvh.each_hit(self.ray, self.skip, self.visit);
+    fn with_simd<S: pulp::Simd>(self, simd: S) {
+        self.bvh
+            .each_hit(Boxes::of(simd), self.ray, self.skip, self.visit);
     }
 }
 
@@ -2581,6 +2623,71 @@ struct Slab {
     /// Inverse direction.
     inv: [f32; 3],
     t_min: f32,
+}
+
+/// A ray's planes for [`Slab::test_v3`], formed from its [`Slab`] once
+/// per single-ray walk ([`Planes::of`]), not with the [`Slab`]: a
+/// packet's rays mostly never walk alone, and its own tests are the
+/// lane-by-lane ones.
+#[derive(Clone, Copy, Debug)]
+struct Planes {
+    /// Per axis, the plane array of a node ([`Node::planes`]) the ray
+    /// enters each box through (its lower plane where the inverse
+    /// direction is positive, else its upper), and the one it leaves
+    /// through.
+    near: [usize; 3],
+    far: [usize; 3],
+    /// Per axis, the origin met against the `near` plane (`lo` where that
+    /// is a lower plane, else `hi`), and against the `far` plane.
+    o_near: [f32; 3],
+    o_far: [f32; 3],
+}
+
+impl Planes {
+    #[inline(always)]
+    fn of(slab: &Slab) -> Planes {
+        let (lo, hi) = (slab.lo, slab.hi);
+        // By the sign bit: `inv` is never zero or NaN (every component of
+        // the direction it inverts is finite and at least 10⁻³⁰).
+        let down = |a: usize| slab.inv[a].is_sign_negative();
+        Planes {
+            near: std::array::from_fn(|a| 2 * a + usize::from(down(a))),
+            far: std::array::from_fn(|a| 2 * a + usize::from(!down(a))),
+            o_near: std::array::from_fn(|a| if down(a) { hi[a] } else { lo[a] }),
+            o_far: std::array::from_fn(|a| if down(a) { lo[a] } else { hi[a] }),
+        }
+    }
+}
+
+/// How [`Slab::test`] runs: eight lanes wide with x86-64-v3's own
+/// instructions (one compare and one `vmovmskps` for the mask, only the
+/// planes each axis enters and leaves through), or written lane by lane
+/// for the vectoriser (the baseline). Formed from a query's `pulp` token
+/// ([`Boxes::of`]), whose type is known where the query is compiled, so
+/// each instruction set's copy holds one form.
+#[derive(Clone, Copy, Debug)]
+struct Boxes(#[cfg(target_arch = "x86_64")] Option<pulp::x86::V3>);
+
+impl Boxes {
+    /// The form for the instruction set of `simd` (the eight-wide one only
+    /// for x86-64-v3's token; its type is known at compile time, so the
+    /// `downcast` folds away).
+    #[inline(always)]
+    fn of<S: pulp::Simd>(simd: S) -> Boxes {
+        #[cfg(target_arch = "x86_64")]
+        {
+            Boxes(
+                (&simd as &dyn std::any::Any)
+                    .downcast_ref::<pulp::x86::V3>()
+                    .copied(),
+            )
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            let _ = simd;
+            Boxes()
+        }
+    }
 }
 
 /// `a < b ? a : b`, the semantics of `minps` (the vectoriser emits it).
@@ -2641,7 +2748,87 @@ impl Slab {
     /// ones on the baseline, the same IEEE operations in every lane either
     /// way (no fused multiply-add: Rust never contracts).
     #[inline(always)]
-    fn test(&self, n: &Node, t_max: f32) -> (u32, [f32; WIDTH]) {
+    fn test(&self, (boxes, planes): (Boxes, &Planes), n: &Node, t_max: f32) -> (u32, [f32; WIDTH]) {
+        #[cfg(target_arch = "x86_64")]
+        if let Some(v3) = boxes.0 {
+            return self.test_v3(v3, planes, n, t_max);
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        let _ = (boxes, planes);
+        self.test_lanes(n, t_max)
+    }
+
+    /// [`Slab::test`] with x86-64-v3's instructions, eight lanes at once:
+    /// each axis meets only the plane the ray enters through and the one
+    /// it leaves through ([`Planes`]), not both planes
+    /// and then their `min` and `max` as [`Slab::test_lanes`] does, and
+    /// the mask is one compare and one `vmovmskps`.
+    ///
+    /// The walk decides the same: it reads `t_near` and `t_far` only
+    /// through comparisons, and they compare as [`Slab::test_lanes`]'
+    /// do. With `ix > 0`, `(min − lo)·ix ≤ (max − hi)·ix`, since `min ≤
+    /// max` and `lo ≥ hi` order the exact differences and rounding a
+    /// difference, and a product by a positive factor, keeps an order
+    /// (it is monotone); with `ix < 0` the order flips. So the near
+    /// plane's value is the `min` of the two (equal to it; where the two
+    /// are equal zeros, `lane_min` may give the other zero's sign, which
+    /// no comparison sees) and the far plane's the `max`. No lane of a
+    /// used box makes a NaN that `min` or `max` would have dropped: its
+    /// planes are finite (only empty slots, which `used` masks, are +∞)
+    /// and the origins never NaN, so `plane − o` is never NaN (an
+    /// infinitely inflated origin gives ±∞, in order), and `ix` is finite
+    /// and non-zero, so neither is the product. The
+    /// remaining steps are `test_lanes`' own, in its order: `maxps` and
+    /// `minps` are its `lane_max` and `lane_min`. Test
+    /// `both_node_tests_decide_alike`.
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    fn test_v3(
+        &self,
+        v3: pulp::x86::V3,
+        order: &Planes,
+        n: &Node,
+        t_max: f32,
+    ) -> (u32, [f32; WIDTH]) {
+        use std::arch::x86_64::__m256;
+        let avx = v3.avx;
+        let planes = n.planes();
+        let splat = |x: f32| avx._mm256_set1_ps(x);
+        // `(plane − o)·inv` of a plane array (`& 7`: one of the eight, so
+        // no bounds check).
+        let t = |plane: usize, o: f32, inv: f32| {
+            let p: __m256 = bytemuck::cast(planes[plane & 7]);
+            avx._mm256_mul_ps(avx._mm256_sub_ps(p, splat(o)), splat(inv))
+        };
+        let [ix, iy, iz] = self.inv;
+        let [nx, ny, nz] = order.near;
+        let [fx, fy, fz] = order.far;
+        let [onx, ony, onz] = order.o_near;
+        let [ofx, ofy, ofz] = order.o_far;
+        let tn = avx._mm256_max_ps(
+            avx._mm256_max_ps(
+                avx._mm256_max_ps(t(nx, onx, ix), t(ny, ony, iy)),
+                t(nz, onz, iz),
+            ),
+            splat(self.t_min),
+        );
+        let tf = avx._mm256_mul_ps(
+            avx._mm256_min_ps(
+                avx._mm256_min_ps(t(fx, ofx, ix), t(fy, ofy, iy)),
+                t(fz, ofz, iz),
+            ),
+            splat(Slab::GROW),
+        );
+        let tf = avx._mm256_min_ps(tf, splat(t_max * Slab::GROW));
+        let le = avx._mm256_cmp_ps::<{ std::arch::x86_64::_CMP_LE_OQ }>(tn, tf);
+        #[expect(clippy::cast_sign_loss, reason = "eight mask bits")]
+        let mask = avx._mm256_movemask_ps(le) as u32;
+        (mask & n.used, bytemuck::cast(tn))
+    }
+
+    /// [`Slab::test`] lane by lane.
+    #[inline(always)]
+    fn test_lanes(&self, n: &Node, t_max: f32) -> (u32, [f32; WIDTH]) {
         let [ox0, oy0, oz0] = self.lo;
         let [ox1, oy1, oz1] = self.hi;
         let [ix, iy, iz] = self.inv;
@@ -2913,6 +3100,126 @@ mod tests {
                 }
             })
             .collect()
+    }
+
+    /// `Slab::test_v3` (x86-64-v3, where this machine has it) against
+    /// `Slab::test_lanes` on nodes and rays generated to hit their edge
+    /// cases: boxes flat on an axis, boxes whose planes pass through the
+    /// origin or sit on a ray's `t_min`, empty slots, direction components
+    /// of ±0, below 10⁻³⁰ and of either sign, origins off the `f64` ray's
+    /// (inflated slabs), bounds from 0 to +∞. The walk reads a test's
+    /// `t_near` only through comparisons, so the two must give the same
+    /// mask and, in its lanes, `t_near` equal as numbers.
+    #[test]
+    fn both_node_tests_decide_alike() {
+        let Some(v3) = (match pulp::Arch::new() {
+            #[cfg(target_arch = "x86_64")]
+            pulp::Arch::V3(v3) => Some(v3),
+            _ => None,
+        }) else {
+            return;
+        };
+        let mut s = 0x2545_F491_4F6C_DD1Du64;
+        // 24 random bits as a float in [0, 1).
+        let mut unit = move || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            #[expect(clippy::cast_precision_loss, reason = "24 random bits: exact")]
+            let u = (s >> 40) as f32 / (1u64 << 24) as f32;
+            u
+        };
+        // One of `n` choices.
+        let mut s2 = 0x9E37_79B9_7F4A_7C15u64;
+        let mut choice = move |n: u64| {
+            s2 ^= s2 << 13;
+            s2 ^= s2 >> 7;
+            s2 ^= s2 << 17;
+            (s2 >> 32) % n
+        };
+        // A coordinate: mostly in [-2, 2), sometimes exactly 0, ±1.
+        let coord = |u: f32, c: u64| match c {
+            0 => 0.0,
+            1 => 1.0,
+            2 => -1.0,
+            _ => u * 4.0 - 2.0,
+        };
+        let mut masks = 0u32;
+        for case in 0..200_000u32 {
+            let mut n = empty_node();
+            for k in 0..WIDTH {
+                if unit() < 0.15 {
+                    continue;
+                }
+                let a = Vec3::new(
+                    coord(unit(), choice(8)),
+                    coord(unit(), choice(8)),
+                    coord(unit(), choice(8)),
+                );
+                let mut b = Vec3::new(
+                    coord(unit(), choice(8)),
+                    coord(unit(), choice(8)),
+                    coord(unit(), choice(8)),
+                );
+                if unit() < 0.2 {
+                    // Flat on one axis.
+                    b.y = a.y;
+                }
+                set_lane(&mut n, k, Aabb::from_min_max(a.min(b), a.max(b)));
+                n.used |= 1 << k;
+            }
+            let comp = |u: f32, c: u64| match c {
+                0 => 0.0,
+                1 => -0.0,
+                2 => 1e-31,
+                3 => -1e-31,
+                _ => u * 2.0 - 1.0,
+            };
+            let dir = DVec3::new(
+                f64::from(comp(unit(), choice(10))),
+                f64::from(comp(unit(), choice(10))),
+                f64::from(comp(unit(), choice(10))),
+            );
+            let dir = if dir == DVec3::ZERO { DVec3::X } else { dir };
+            // An origin that is not an `f32` point half the time (the
+            // `f32` ray strays from it: inflated slabs).
+            let jitter = if case % 2 == 0 { 1e-9 } else { 0.0 };
+            let origin = DVec3::new(
+                f64::from(coord(unit(), choice(8))) + jitter,
+                f64::from(coord(unit(), choice(8))),
+                f64::from(coord(unit(), choice(8))) - jitter,
+            );
+            let ray = Ray64 {
+                origin,
+                dir,
+                t_min: if case % 3 == 0 {
+                    f64::from(unit())
+                } else {
+                    0.0
+                },
+                t_max: f64::INFINITY,
+            };
+            let walk = WalkRay::new(&ray, 10.0);
+            let slab = Slab::new(&walk);
+            let t_max = match case % 4 {
+                0 => f32::INFINITY,
+                1 => 0.0,
+                _ => unit() * 4.0,
+            };
+            let (lanes, lanes_tn) = slab.test_lanes(&n, t_max);
+            let (wide, wide_tn) = slab.test_v3(v3, &Planes::of(&slab), &n, t_max);
+            assert_eq!(lanes, wide, "case {case}: masks differ");
+            for k in (0..WIDTH).filter(|&k| lanes & 1 << k != 0) {
+                assert!(
+                    lanes_tn[k] == wide_tn[k],
+                    "case {case}, lane {k}: t_near {} against {}",
+                    lanes_tn[k],
+                    wide_tn[k]
+                );
+            }
+            masks |= lanes;
+        }
+        assert_eq!(masks, 0xFF, "every lane entered somewhere");
     }
 
     fn soup(n: usize, seed: u64, size: f32) -> Vec<[Vec3; 3]> {
@@ -3452,7 +3759,7 @@ mod tests {
                 );
             }
             n.used = if case % 11 == 0 { 0b1011_0111 } else { 0xFF };
-            let wanted = (0..PACKET).fold(0u32, |m, r| m | slabs[r].test(&n, t_max[r]).0);
+            let wanted = (0..PACKET).fold(0u32, |m, r| m | slabs[r].test_lanes(&n, t_max[r]).0);
             let candidates = wide.children_of(&n);
             assert_eq!(
                 wanted & !candidates,
@@ -3464,7 +3771,7 @@ mod tests {
             for k in 0..WIDTH {
                 let (mask, tn) = wide.rays_in(&n, k);
                 for r in 0..PACKET {
-                    let (own, own_tn) = slabs[r].test(&n, t_max[r]);
+                    let (own, own_tn) = slabs[r].test_lanes(&n, t_max[r]);
                     if n.used & (1 << k) != 0 {
                         assert_eq!(
                             (mask >> r) & 1,
