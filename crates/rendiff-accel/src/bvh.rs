@@ -1930,11 +1930,11 @@ impl Bvh {
                 let mut mask = 0u32;
                 if let Some(wide) = &mut wide {
                     wide.set_bounds(&t_prune);
-                    let mut c = wide.children_of(nd);
+                    let mut c = wide.children_of(boxes, nd);
                     while c != 0 {
                         let k = c.trailing_zeros() as usize;
                         c &= c - 1;
-                        let (entered, tn) = wide.rays_in(nd, k);
+                        let (entered, tn) = wide.rays_in(boxes, nd, k);
                         let r = entered & active;
                         rays_of[k] = r;
                         mask |= u32::from(r != 0) << k;
@@ -1951,7 +1951,7 @@ impl Bvh {
                     while m != 0 {
                         let r = m.trailing_zeros() as usize;
                         m &= m - 1;
-                        let (ray_mask, tn) = slabs[r].test_lanes(nd, t_prune[r]);
+                        let (ray_mask, tn) = slabs[r].test_lanes(boxes, nd, t_prune[r]);
                         by_ray |= u64::from(ray_mask) << (8 * r);
                         for k in 0..WIDTH {
                             let hit = (ray_mask >> k) & 1;
@@ -2181,11 +2181,11 @@ impl Bvh {
                     // rays' own slab tests.
                     let mut rays_of = [0u32; WIDTH];
                     let mut mask = 0u32;
-                    let mut c = wide.children_of(nd);
+                    let mut c = wide.children_of(boxes, nd);
                     while c != 0 {
                         let k = c.trailing_zeros() as usize;
                         c &= c - 1;
-                        let r = wide.rays_in(nd, k).0 & active;
+                        let r = wide.rays_in(boxes, nd, k).0 & active;
                         rays_of[k] = r;
                         mask |= u32::from(r != 0) << k;
                     }
@@ -2196,7 +2196,7 @@ impl Bvh {
                     while m != 0 {
                         let r = m.trailing_zeros() as usize;
                         m &= m - 1;
-                        let (mask, _) = slabs[r].test_lanes(nd, t_prune[r]);
+                        let (mask, _) = slabs[r].test_lanes(boxes, nd, t_prune[r]);
                         by_ray |= u64::from(mask) << (8 * r);
                     }
                     rays_by_child(by_ray)
@@ -2688,6 +2688,33 @@ impl Boxes {
             Boxes()
         }
     }
+
+    /// Whether this is the eight-wide form.
+    #[cfg(test)]
+    fn is_wide(self) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        return self.0.is_some();
+        #[cfg(not(target_arch = "x86_64"))]
+        false
+    }
+
+    /// `a[k] <= b[k]` lane by lane as a bit mask: one compare and one
+    /// `vmovmskps` on x86-64-v3, two SSE halves otherwise (the vectoriser
+    /// turned the eight lanes' bits into shuffles and ORs). Both compares
+    /// are ordered: a NaN lane is clear either way.
+    #[inline(always)]
+    fn le_mask(self, a: [f32; WIDTH], b: [f32; WIDTH]) -> u32 {
+        #[cfg(target_arch = "x86_64")]
+        if let Some(v3) = self.0 {
+            use std::arch::x86_64::_CMP_LE_OQ;
+            let avx = v3.avx;
+            let le = avx._mm256_cmp_ps::<_CMP_LE_OQ>(bytemuck::cast(a), bytemuck::cast(b));
+            #[expect(clippy::cast_sign_loss, reason = "eight mask bits")]
+            return avx._mm256_movemask_ps(le) as u32;
+        }
+        let half = |a: &[f32], b: &[f32]| Vec4::from_slice(a).cmple(Vec4::from_slice(b)).bitmask();
+        half(&a[..4], &b[..4]) | half(&a[4..], &b[4..]) << 4
+    }
 }
 
 /// `a < b ? a : b`, the semantics of `minps` (the vectoriser emits it).
@@ -2754,8 +2781,8 @@ impl Slab {
             return self.test_v3(v3, planes, n, t_max);
         }
         #[cfg(not(target_arch = "x86_64"))]
-        let _ = (boxes, planes);
-        self.test_lanes(n, t_max)
+        let _ = planes;
+        self.test_lanes(boxes, n, t_max)
     }
 
     /// [`Slab::test`] with x86-64-v3's instructions, eight lanes at once:
@@ -2826,9 +2853,9 @@ impl Slab {
         (mask & n.used, bytemuck::cast(tn))
     }
 
-    /// [`Slab::test`] lane by lane.
+    /// [`Slab::test`] lane by lane (the mask by [`Boxes::le_mask`]).
     #[inline(always)]
-    fn test_lanes(&self, n: &Node, t_max: f32) -> (u32, [f32; WIDTH]) {
+    fn test_lanes(&self, boxes: Boxes, n: &Node, t_max: f32) -> (u32, [f32; WIDTH]) {
         let [ox0, oy0, oz0] = self.lo;
         let [ox1, oy1, oz1] = self.hi;
         let [ix, iy, iz] = self.inv;
@@ -2857,11 +2884,7 @@ impl Slab {
             t_near[k] = tn;
             t_far[k] = tf;
         }
-        // `tn <= tf` lane by lane as two `movmskps` (the vectoriser turned
-        // the eight lanes' bits into shuffles and ORs).
-        let half = |a: &[f32], b: &[f32]| Vec4::from_slice(a).cmple(Vec4::from_slice(b)).bitmask();
-        let mask = half(&t_near[..4], &t_far[..4]) | half(&t_near[4..], &t_far[4..]) << 4;
-        (mask & n.used, t_near)
+        (boxes.le_mask(t_near, t_far) & n.used, t_near)
     }
 }
 
@@ -2933,7 +2956,7 @@ impl PacketSlab {
     /// (`t_near ≤ t_far`) makes the bounds pass. No operand is NaN in a
     /// used lane (finite boxes, finite inverse directions).
     #[inline(always)]
-    fn children_of(&self, n: &Node) -> u32 {
+    fn children_of(&self, boxes: Boxes, n: &Node) -> u32 {
         let mut lo_t = [0.0f32; WIDTH];
         let mut hi_t = [0.0f32; WIDTH];
         let planes = [
@@ -2971,15 +2994,14 @@ impl PacketSlab {
             tn[k] = lane_max(lo_t[k], self.t_min_least);
             tf[k] = lane_min(hi_t[k] * Slab::GROW, self.far_most);
         }
-        let half = |a: &[f32], b: &[f32]| Vec4::from_slice(a).cmple(Vec4::from_slice(b)).bitmask();
-        (half(&tn[..4], &tf[..4]) | half(&tn[4..], &tf[4..]) << 4) & n.used
+        boxes.le_mask(tn, tf) & n.used
     }
 
     /// The rays (a bit each) that enter child `k` of `n`, and each ray's
     /// `t_near` of it: lane `r` is exactly ray `r`'s [`Slab::test`] of that
     /// child with its `far` (the same operations on the same operands).
     #[inline(always)]
-    fn rays_in(&self, n: &Node, k: usize) -> (u32, [f32; PACKET]) {
+    fn rays_in(&self, boxes: Boxes, n: &Node, k: usize) -> (u32, [f32; PACKET]) {
         let (bx0, bx1, by0, by1, bz0, bz1) = (
             n.min_x[k], n.max_x[k], n.min_y[k], n.max_y[k], n.min_z[k], n.max_z[k],
         );
@@ -3005,8 +3027,7 @@ impl PacketSlab {
             ) * Slab::GROW;
             tf[r] = lane_min(f, self.far[r]);
         }
-        let half = |a: &[f32], b: &[f32]| Vec4::from_slice(a).cmple(Vec4::from_slice(b)).bitmask();
-        (half(&tn[..4], &tf[..4]) | half(&tn[4..], &tf[4..]) << 4, tn)
+        (boxes.le_mask(tn, tf), tn)
     }
 
     /// Takes the rays' current bounds (a closest-hit walk shrinks them).
@@ -3206,7 +3227,7 @@ mod tests {
                 1 => 0.0,
                 _ => unit() * 4.0,
             };
-            let (lanes, lanes_tn) = slab.test_lanes(&n, t_max);
+            let (lanes, lanes_tn) = slab.test_lanes(Boxes::of(pulp::Scalar::new()), &n, t_max);
             let (wide, wide_tn) = slab.test_v3(v3, &Planes::of(&slab), &n, t_max);
             assert_eq!(lanes, wide, "case {case}: masks differ");
             for k in (0..WIDTH).filter(|&k| lanes & 1 << k != 0) {
@@ -3685,6 +3706,12 @@ mod tests {
     /// ([`PacketSlab::rays_in`]) is each ray's own test bit for bit.
     #[test]
     fn packet_tests_agree_with_each_rays_slab_test() {
+        let lanes = Boxes::of(pulp::Scalar::new());
+        let forms = match pulp::Arch::new() {
+            #[cfg(target_arch = "x86_64")]
+            pulp::Arch::V3(v3) => vec![lanes, Boxes::of(v3)],
+            _ => vec![lanes],
+        };
         let mut z = 0x2545_f491_4f6c_dd1du64;
         let mut next = move || {
             z ^= z << 13;
@@ -3759,26 +3786,32 @@ mod tests {
                 );
             }
             n.used = if case % 11 == 0 { 0b1011_0111 } else { 0xFF };
-            let wanted = (0..PACKET).fold(0u32, |m, r| m | slabs[r].test_lanes(&n, t_max[r]).0);
-            let candidates = wide.children_of(&n);
-            assert_eq!(
-                wanted & !candidates,
-                0,
-                "case {case}: a child a ray enters was left out"
-            );
-            entered += wanted.count_ones() as usize;
-            kept += candidates.count_ones() as usize;
-            for k in 0..WIDTH {
-                let (mask, tn) = wide.rays_in(&n, k);
-                for r in 0..PACKET {
-                    let (own, own_tn) = slabs[r].test_lanes(&n, t_max[r]);
-                    if n.used & (1 << k) != 0 {
-                        assert_eq!(
-                            (mask >> r) & 1,
-                            (own >> k) & 1,
-                            "case {case}: ray {r}, child {k}"
-                        );
-                        assert_eq!(tn[r].to_bits(), own_tn[k].to_bits(), "case {case}: t_near");
+            // Each mask form ([`Boxes::le_mask`]) the machine has.
+            for &boxes in &forms {
+                let wanted =
+                    (0..PACKET).fold(0u32, |m, r| m | slabs[r].test_lanes(boxes, &n, t_max[r]).0);
+                let candidates = wide.children_of(boxes, &n);
+                assert_eq!(
+                    wanted & !candidates,
+                    0,
+                    "case {case}: a child a ray enters was left out"
+                );
+                if !boxes.is_wide() {
+                    entered += wanted.count_ones() as usize;
+                    kept += candidates.count_ones() as usize;
+                }
+                for k in 0..WIDTH {
+                    let (mask, tn) = wide.rays_in(boxes, &n, k);
+                    for r in 0..PACKET {
+                        let (own, own_tn) = slabs[r].test_lanes(boxes, &n, t_max[r]);
+                        if n.used & (1 << k) != 0 {
+                            assert_eq!(
+                                (mask >> r) & 1,
+                                (own >> k) & 1,
+                                "case {case}: ray {r}, child {k}"
+                            );
+                            assert_eq!(tn[r].to_bits(), own_tn[k].to_bits(), "case {case}: t_near");
+                        }
                     }
                 }
             }
