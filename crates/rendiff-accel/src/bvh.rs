@@ -96,6 +96,10 @@ pub(crate) struct Node {
     pad: [u32; 7],
 }
 
+#[cfg_attr(
+    not(target_arch = "x86_64"),
+    allow(dead_code, reason = "read by `Slab::test_v3`")
+)]
 impl Node {
     /// The six plane arrays in their order (`min_x`, `max_x`, `min_y`,
     /// `max_y`, `min_z`, `max_z`), then `child` and `used` with `pad`, as
@@ -2630,6 +2634,10 @@ struct Slab {
 /// packet's rays mostly never walk alone, and its own tests are the
 /// lane-by-lane ones.
 #[derive(Clone, Copy, Debug)]
+#[cfg_attr(
+    not(target_arch = "x86_64"),
+    allow(dead_code, reason = "read by `Slab::test_v3`")
+)]
 struct Planes {
     /// Per axis, the plane array of a node ([`Node::planes`]) the ray
     /// enters each box through (its lower plane where the inverse
@@ -2664,7 +2672,10 @@ impl Planes {
 /// planes each axis enters and leaves through), or written lane by lane
 /// for the vectoriser (the baseline). Formed from a query's `pulp` token
 /// ([`Boxes::of`]), whose type is known where the query is compiled, so
-/// each instruction set's copy holds one form.
+/// each instruction set's copy holds one form. (Only pulp's `V3` token
+/// selects the eight-wide form: were pulp's `x86-v4` feature switched on,
+/// `pulp::Arch::new` would pick `V4` on AVX-512 machines and the queries
+/// would run the lane form there, as would the tests.)
 #[derive(Clone, Copy, Debug)]
 struct Boxes(#[cfg(target_arch = "x86_64")] Option<pulp::x86::V3>);
 
@@ -2770,10 +2781,9 @@ impl Slab {
     }
 
     /// The children of `n` whose boxes the ray enters before `t_max` (a bit
-    /// mask), and the `t_near` of each lane. Written lane by lane for the
-    /// vectoriser: one 256-bit operation per step on x86-64-v3, two SSE
-    /// ones on the baseline, the same IEEE operations in every lane either
-    /// way (no fused multiply-add: Rust never contracts).
+    /// mask), and the `t_near` of each lane: [`Slab::test_v3`] where the
+    /// query runs on x86-64-v3 (`boxes`), else [`Slab::test_lanes`]; the
+    /// walk decides the same with either.
     #[inline(always)]
     fn test(&self, (boxes, planes): (Boxes, &Planes), n: &Node, t_max: f32) -> (u32, [f32; WIDTH]) {
         #[cfg(target_arch = "x86_64")]
@@ -2801,7 +2811,9 @@ impl Slab {
     /// are equal zeros, `lane_min` may give the other zero's sign, which
     /// no comparison sees) and the far plane's the `max`. No lane of a
     /// used box makes a NaN that `min` or `max` would have dropped: its
-    /// planes are finite (only empty slots, which `used` masks, are +∞)
+    /// planes are finite (the loader keeps every vertex within ±10¹²,
+    /// `MAX_COORDINATE`; only empty slots, which `used` masks, are +∞; a
+    /// tree built on non-finite vertices is outside this argument)
     /// and the origins never NaN, so `plane − o` is never NaN (an
     /// infinitely inflated origin gives ±∞, in order), and `ix` is finite
     /// and non-zero, so neither is the product. The
@@ -2853,7 +2865,11 @@ impl Slab {
         (mask & n.used, bytemuck::cast(tn))
     }
 
-    /// [`Slab::test`] lane by lane (the mask by [`Boxes::le_mask`]).
+    /// [`Slab::test`] lane by lane (the mask by [`Boxes::le_mask`]):
+    /// written for the vectoriser, one 256-bit operation per step on
+    /// x86-64-v3, two SSE ones on the baseline, the same IEEE operations
+    /// in every lane either way (no fused multiply-add: Rust never
+    /// contracts).
     #[inline(always)]
     fn test_lanes(&self, boxes: Boxes, n: &Node, t_max: f32) -> (u32, [f32; WIDTH]) {
         let [ox0, oy0, oz0] = self.lo;
@@ -2998,8 +3014,9 @@ impl PacketSlab {
     }
 
     /// The rays (a bit each) that enter child `k` of `n`, and each ray's
-    /// `t_near` of it: lane `r` is exactly ray `r`'s [`Slab::test`] of that
-    /// child with its `far` (the same operations on the same operands).
+    /// `t_near` of it: lane `r` is exactly ray `r`'s [`Slab::test_lanes`]
+    /// of that child with its `far` (the same operations on the same
+    /// operands).
     #[inline(always)]
     fn rays_in(&self, boxes: Boxes, n: &Node, k: usize) -> (u32, [f32; PACKET]) {
         let (bx0, bx1, by0, by1, bz0, bz1) = (
@@ -3131,13 +3148,61 @@ mod tests {
     /// (inflated slabs), bounds from 0 to +∞. The walk reads a test's
     /// `t_near` only through comparisons, so the two must give the same
     /// mask and, in its lanes, `t_near` equal as numbers.
+    /// [`Boxes::le_mask`]'s two forms give the same mask on every kind of
+    /// lane: equal values, ±0, ±∞, NaN on either side, subnormals and
+    /// generated values (the packet tests compare each form only with
+    /// itself, so a wrong predicate in one would cancel out there).
     #[test]
+    #[cfg(target_arch = "x86_64")]
+    fn both_mask_forms_agree() {
+        let pulp::Arch::V3(v3) = pulp::Arch::new() else {
+            return;
+        };
+        let (wide, lanes) = (Boxes::of(v3), Boxes::of(pulp::Scalar::new()));
+        assert!(wide.is_wide() && !lanes.is_wide());
+        let special = [
+            0.0,
+            -0.0,
+            1.0,
+            -1.0,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::NAN,
+            -f32::NAN,
+            f32::MIN_POSITIVE / 4.0,
+            f32::MAX,
+            1.0 + f32::EPSILON,
+        ];
+        let mut s = 0x1234_5678_9ABC_DEF1u64;
+        let mut pick = move || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            s
+        };
+        let mut seen = [0u32; 2];
+        for case in 0..100_000u32 {
+            let mut value = || {
+                let r = pick();
+                let k = usize::from((r % 16) as u8);
+                #[expect(clippy::cast_precision_loss, reason = "a few random bits")]
+                let v = ((r >> 40) % 5) as f32 - 2.0;
+                if k < special.len() { special[k] } else { v }
+            };
+            let a: [f32; WIDTH] = std::array::from_fn(|_| value());
+            let b: [f32; WIDTH] = std::array::from_fn(|_| value());
+            let (m, l) = (wide.le_mask(a, b), lanes.le_mask(a, b));
+            assert_eq!(m, l, "case {case}: {a:?} <= {b:?}");
+            seen[0] |= m;
+            seen[1] |= !m & 0xFF;
+        }
+        assert_eq!(seen, [0xFF, 0xFF], "every lane both set and clear");
+    }
+
+    #[test]
+    #[cfg(target_arch = "x86_64")]
     fn both_node_tests_decide_alike() {
-        let Some(v3) = (match pulp::Arch::new() {
-            #[cfg(target_arch = "x86_64")]
-            pulp::Arch::V3(v3) => Some(v3),
-            _ => None,
-        }) else {
+        let pulp::Arch::V3(v3) = pulp::Arch::new() else {
             return;
         };
         let mut s = 0x2545_F491_4F6C_DD1Du64;
