@@ -3148,6 +3148,17 @@ mod tests {
     /// (inflated slabs), bounds from 0 to +∞. The walk reads a test's
     /// `t_near` only through comparisons, so the two must give the same
     /// mask and, in its lanes, `t_near` equal as numbers.
+    /// A xorshift64 stream from `seed` (non-zero): the generated cases of
+    /// the tests below.
+    fn xorshift(mut s: u64) -> impl FnMut() -> u64 {
+        move || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            s
+        }
+    }
+
     /// [`Boxes::le_mask`]'s two forms give the same mask on every kind of
     /// lane: equal values, ±0, ±∞, NaN on either side, subnormals and
     /// generated values (the packet tests compare each form only with
@@ -3173,13 +3184,7 @@ mod tests {
             f32::MAX,
             1.0 + f32::EPSILON,
         ];
-        let mut s = 0x1234_5678_9ABC_DEF1u64;
-        let mut pick = move || {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            s
-        };
+        let mut pick = xorshift(0x1234_5678_9ABC_DEF1);
         let mut seen = [0u32; 2];
         for case in 0..100_000u32 {
             let mut value = || {
@@ -3205,24 +3210,12 @@ mod tests {
         let pulp::Arch::V3(v3) = pulp::Arch::new() else {
             return;
         };
-        let mut s = 0x2545_F491_4F6C_DD1Du64;
-        // 24 random bits as a float in [0, 1).
-        let mut unit = move || {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            #[expect(clippy::cast_precision_loss, reason = "24 random bits: exact")]
-            let u = (s >> 40) as f32 / (1u64 << 24) as f32;
-            u
-        };
-        // One of `n` choices.
-        let mut s2 = 0x9E37_79B9_7F4A_7C15u64;
-        let mut choice = move |n: u64| {
-            s2 ^= s2 << 13;
-            s2 ^= s2 >> 7;
-            s2 ^= s2 << 17;
-            (s2 >> 32) % n
-        };
+        // 24 random bits as a float in [0, 1), and one of `n` choices.
+        let mut bits = xorshift(0x2545_F491_4F6C_DD1D);
+        #[expect(clippy::cast_precision_loss, reason = "24 random bits: exact")]
+        let mut unit = move || (bits() >> 40) as f32 / (1u64 << 24) as f32;
+        let mut other = xorshift(0x9E37_79B9_7F4A_7C15);
+        let mut choice = move |n: u64| (other() >> 32) % n;
         // A coordinate: mostly in [-2, 2), sometimes exactly 0, ±1.
         let coord = |u: f32, c: u64| match c {
             0 => 0.0,
