@@ -564,9 +564,7 @@ impl<'a, 's> ShadowRays<'a, 's> {
             let cached = match &cache {
                 Some(c) => c.stops(
                     qs,
-                    &rays[..m],
-                    &skips[..m],
-                    &accept,
+                    (&rays[..m], &lights[..m], &skips[..m]),
                     &mut blocked,
                     &mut stopper,
                 ),
@@ -598,7 +596,7 @@ impl<'a, 's> ShadowRays<'a, 's> {
             // where it is stopped (inside a shadow; at its edge, the next
             // packet would mostly miss it).
             cache = if blocked[m - 1] {
-                Occluder::after(cache, qs[m - 1].light, stopper[m - 1], scene)
+                Occluder::after(cache, qs[m - 1].light, stopper[m - 1], a)
             } else {
                 None
             };
@@ -622,11 +620,7 @@ impl<'a, 's> ShadowRays<'a, 's> {
     fn kept(&self, light: usize, entry: u64) -> Occluder {
         #[expect(clippy::cast_possible_truncation, reason = "the low word")]
         let id = entry as u32;
-        Occluder {
-            light,
-            id,
-            corners: self.accel.scene.triangle(id),
-        }
+        Occluder::new(self.accel, light, id)
     }
 
     /// Keeps `cache` as the occluder of its light, or, where it is `None`,
@@ -646,26 +640,66 @@ impl<'a, 's> ShadowRays<'a, 's> {
 }
 
 /// The shadow cache's entry: the triangle that stopped the latest stopped
-/// ray toward `light`, and its corners.
+/// ray toward `light`, its corners, and what the packets' `accept` asks of
+/// it, formed once.
 #[derive(Clone, Copy, Debug)]
 struct Occluder {
     light: usize,
     id: u32,
     corners: [Vec3; 3],
+    /// `accept`'s answer for a ray that carries no point light's position
+    /// (a parallel light's, or a point light's zero or non-finite segment):
+    /// the triangle casts.
+    casts: bool,
+    /// `accept`'s answer for a ray that carries the point light's
+    /// position: it casts and its plane does not pass through the light.
+    casts_on_point: bool,
 }
 
 impl Occluder {
+    /// The entry for `light` and triangle `id`. `accept`'s two answers are
+    /// formed here, once, instead of at every ray the entry is tried on
+    /// (`plane_through` was about 125 instructions a call, 2.6 % of
+    /// `near_plane`'s raster render): a packet ray's `lights[k]` is either
+    /// `None` or the position `shadow_ray` gives every segment toward
+    /// `light`, `to_f64` of the light's own, so `accept(k, id)` is one of
+    /// the two.
+    fn new(a: &Accel<'_>, light: usize, id: u32) -> Occluder {
+        let scene = a.scene;
+        let casts = a.class[id as usize] != ShadowClass::None;
+        let through = match scene.lights.get(light).map(|l| l.kind) {
+            Some(rendiff_core::shade::LightKind::Point { position }) => {
+                plane_through(scene, id, to_f64(position))
+            }
+            _ => false,
+        };
+        Occluder {
+            light,
+            id,
+            corners: scene.triangle(id),
+            casts,
+            casts_on_point: casts && !through,
+        }
+    }
+
     /// The entry for `light` and triangle `id`: `cache` where it is that,
     /// else formed.
     #[inline(never)]
-    fn after(cache: Option<Occluder>, light: usize, id: u32, scene: &TriScene) -> Option<Occluder> {
+    fn after(cache: Option<Occluder>, light: usize, id: u32, a: &Accel<'_>) -> Option<Occluder> {
         match cache {
             Some(c) if (c.light, c.id) == (light, id) => Some(c),
-            _ => Some(Occluder {
-                light,
-                id,
-                corners: scene.triangle(id),
-            }),
+            _ => Some(Occluder::new(a, light, id)),
+        }
+    }
+
+    /// What `accept` answers for this entry's triangle and a ray toward
+    /// its light whose point light's position is `point` (`lights[k]`).
+    #[inline(always)]
+    fn accepts(&self, point: Option<DVec3>) -> bool {
+        if point.is_some() {
+            self.casts_on_point
+        } else {
+            self.casts
         }
     }
 
@@ -677,24 +711,26 @@ impl Occluder {
     /// would, since the walk reaches every triangle that test meets
     /// (`for_each_hit`'s set is that test's whole set: a property test for
     /// rays in general, `rays_in_box_faces_meet_what_the_test_meets` for
-    /// rays lying in box faces) and any accepted one stops the ray. (Out of line, as `walk_rest`: inlined, the
-    /// two cost `grazing`, which has no stopped ray, 0.4 %.)
+    /// rays lying in box faces) and any accepted one stops the ray
+    /// ([`Occluder::accepts`]: `accept`'s answer, kept). (Out of line, as
+    /// `walk_rest`: inlined, the two cost `grazing`, which has no stopped
+    /// ray, 0.4 %.)
     #[inline(never)]
     fn stops(
         &self,
         queries: &[ShadowQuery],
-        rays: &[Ray64],
-        skips: &[u32],
-        accept: &impl Fn(usize, u32) -> bool,
+        (rays, lights, skips): (&[Ray64], &[Option<DVec3>], &[u32]),
         blocked: &mut [bool; bvh::PACKET],
         stopper: &mut [u32; bvh::PACKET],
     ) -> usize {
         let mut count = 0;
-        for (k, ((q, ray), &skip)) in queries.iter().zip(rays).zip(skips).enumerate() {
+        for (k, (((q, ray), &light), &skip)) in
+            queries.iter().zip(rays).zip(lights).zip(skips).enumerate()
+        {
             blocked[k] = q.light == self.light
                 && skip != self.id
-                && triangle::meets(ray, &self.corners).is_some()
-                && accept(k, self.id);
+                && self.accepts(light)
+                && triangle::meets(ray, &self.corners).is_some();
             if !blocked[k] {
                 // Past the shadow's edge: the rest walk (from here on,
                 // neighbours of a lit ray).
@@ -735,8 +771,8 @@ fn by_buffer(
             if let Some(c) = cache
                 && c.light == q.light
                 && c.id != skips[k]
+                && c.accepts(light)
                 && triangle::meets(ray, &c.corners).is_some()
-                && accept(k, c.id)
             {
                 blocked[k] = true;
                 continue;
@@ -775,7 +811,7 @@ fn by_buffer(
                 stops
             });
         if blocked[k] {
-            *cache = Occluder::after(*cache, q.light, stopper, a.scene);
+            *cache = Occluder::after(*cache, q.light, stopper, a);
         }
     }
     if n > 0 {
@@ -792,7 +828,7 @@ fn by_buffer(
         // stopped.
         let last = of[n - 1];
         if blocked[last] {
-            *cache = Occluder::after(*cache, queries[last].light, stopper[last], a.scene);
+            *cache = Occluder::after(*cache, queries[last].light, stopper[last], a);
         }
     }
     // As in the walk's path, a packet whose last ray is lit clears the

@@ -665,6 +665,92 @@ mod tests {
         intersect(pre, pre.shear64(), v, t_min, t_max)
     }
 
+    /// [`meets`], the test of a triangle given by its corners, is the
+    /// walks' own test of the triangle in a pack's lane with the constants
+    /// a walk forms ([`RayPrecomp::of`]), bit for bit: the same
+    /// hit or miss, `t` and weights. Rays in every octant, with components
+    /// that tie in magnitude (so the permutation's tie rule decides), that
+    /// are ±0 or too small for `f32`; segments that end before, at and past
+    /// the triangle; triangles hit inside, on an edge and missed.
+    /// (Shearing by the `f32` direction in `meets` fails it.)
+    #[test]
+    fn meets_is_the_walks_lane_test() {
+        let mut next = uniform(0x005e_ed0f_3e75_u64);
+        let (mut hits, mut misses) = (0u32, 0u32);
+        for case in 0..200_000u32 {
+            let pick = |x: f64| -> f64 {
+                match case % 11 {
+                    // Ties in magnitude, and components at or below f32's reach.
+                    0 => 0.5f64.copysign(x - 0.5),
+                    1 => 0.0,
+                    2 => -0.0,
+                    3 => 1e-50 * (x - 0.5),
+                    _ => x - 0.5,
+                }
+            };
+            let raw = DVec3::new(pick(next()), next() - 0.5, pick(next()));
+            if raw.length() == 0.0 {
+                continue;
+            }
+            // Directions as camera and shadow rays make them: normalised in
+            // f64, a few with a component tied to another's magnitude.
+            let mut dir = raw.normalize();
+            if case % 13 == 0 {
+                dir.y = dir.x.abs().copysign(dir.y);
+            }
+            let scale = 10f64.powf(next() * 6.0 - 3.0);
+            let c = DVec3::new(next() - 0.5, next() - 0.5, next() - 0.5) * scale * 4.0;
+            let p =
+                |r: f64, s: f64, t: f64| to_f32(c + DVec3::new(r - 0.5, s - 0.5, t - 0.5) * scale);
+            let tri = [
+                p(next(), next(), next()),
+                p(next(), next(), next()),
+                p(next(), next(), next()),
+            ];
+            let v = tri.map(to_f64);
+            // A target inside, on an edge, or beside the triangle.
+            let (a, b) = (next(), next());
+            let target = match case % 3 {
+                0 => v[0] + (v[1] - v[0]) * a * 0.5 + (v[2] - v[0]) * b * 0.5,
+                1 => v[0] + (v[1] - v[0]) * a,
+                _ => v[0] + (v[1] - v[0]) * (1.0 + a) + (v[2] - v[0]) * b,
+            };
+            let dist = scale * 10f64.powf(next() * 4.0 - 2.0);
+            let t_max = match case % 4 {
+                0 => f64::INFINITY,
+                1 => dist,
+                2 => dist * 0.5,
+                _ => dist * 2.0,
+            };
+            let ray = Ray64 {
+                origin: target - dir * dist,
+                dir,
+                t_min: 0.0,
+                t_max,
+            };
+            let pre = RayPrecomp::of::<false>(&ray, &WalkRay::new(&ray, ray.t_max));
+            let mut pack = TriPack::EMPTY;
+            pack.lanes = 1;
+            pack.set(0, tri);
+            let want = intersect_lane(&pre, pre.shear64(), &pack, 0, ray.t_min, ray.t_max);
+            let got = meets(&ray, &tri);
+            assert_eq!(
+                got.map(|h| (h.t64.to_bits(), h.t.to_bits(), h.b.map(f32::to_bits))),
+                want.map(|h| (h.t64.to_bits(), h.t.to_bits(), h.b.map(f32::to_bits))),
+                "case {case}: {tri:?} {ray:?}"
+            );
+            if got.is_some() {
+                hits += 1;
+            } else {
+                misses += 1;
+            }
+        }
+        assert!(
+            hits > 20_000 && misses > 20_000,
+            "{hits} hits, {misses} misses"
+        );
+    }
+
     fn ray(o: Vec3, d: Vec3) -> Ray {
         Ray {
             origin: o,
