@@ -2747,13 +2747,18 @@ fn plane_bounds(
     let a0 = avx._mm256_sub_ps(p, avx._mm256_set1_ps(o_hi));
     let a1 = avx._mm256_sub_ps(p, avx._mm256_set1_ps(o_lo));
     let (lo, hi) = (avx._mm256_set1_ps(i_lo), avx._mm256_set1_ps(i_hi));
+    // The choices need `a0 ≤ a1` and `i_lo ≤ i_hi`: a range is empty,
+    // `(+∞, −∞)`, where every ray of the packet holds a NaN there (the
+    // ranges' folds skip NaN), and then takes all four products, as the
+    // lane form does, whose mask stays a superset of the rays' own.
+    let ordered = o_lo <= o_hi && i_lo <= i_hi;
     // `blendv(x, y, m)`: `y` where `m`'s sign bit is set, else `x`.
-    if i_lo > 0.0 {
+    if ordered && i_lo > 0.0 {
         (
             avx._mm256_blendv_ps(avx._mm256_mul_ps(a0, lo), avx._mm256_mul_ps(a0, hi), a0),
             avx._mm256_blendv_ps(avx._mm256_mul_ps(a1, hi), avx._mm256_mul_ps(a1, lo), a1),
         )
-    } else if i_hi < 0.0 {
+    } else if ordered && i_hi < 0.0 {
         (
             avx._mm256_blendv_ps(avx._mm256_mul_ps(a1, lo), avx._mm256_mul_ps(a1, hi), a1),
             avx._mm256_blendv_ps(avx._mm256_mul_ps(a0, hi), avx._mm256_mul_ps(a0, lo), a0),
@@ -3410,8 +3415,9 @@ mod tests {
     /// the slab); origins and planes on one grid of values, so that
     /// offsets are exactly ±0; a packet's origins together or apart (a
     /// plane between them); origins off the `f32` grid (inflated
-    /// slabs); flat boxes and empty slots; `t_min` above 0 and short
-    /// walks. (Choosing the greatest by the wrong offset's sign, or
+    /// slabs); packets whose rays all hold a NaN on an axis, in the
+    /// direction or the origin (empty ranges); flat boxes and empty slots;
+    /// `t_min` above 0 and short walks. (Choosing the greatest by the wrong offset's sign, or
     /// swapping `i_lo` and `i_hi` in a branch, fails it. The least's
     /// choice differs only where an offset is negative, so both choices
     /// are negative, and `t_min`, never negative, hides them.)
@@ -3485,7 +3491,13 @@ mod tests {
                     f64::from(unit() - 0.5),
                 ) * spread;
                 let dir = if r % 3 == 2 { base } else { base + stray };
-                let dir = if dir == DVec3::ZERO { DVec3::Y } else { dir };
+                let mut dir = if dir == DVec3::ZERO { DVec3::Y } else { dir };
+                // Packets whose rays all hold a NaN on an axis, in the
+                // direction or the origin (the ranges' folds skip NaN: an
+                // empty range there).
+                if case % 97 == 0 {
+                    dir.x = f64::NAN;
+                }
                 let jitter = if case % 2 == 0 { 1e-9 } else { 0.0 };
                 // Origins apart (as shadow rays' are), so that a plane can
                 // lie between the packet's least and greatest origin.
@@ -3498,11 +3510,14 @@ mod tests {
                 } else {
                     DVec3::ZERO
                 };
+                let mut origin = o
+                    + apart
+                    + DVec3::new(jitter, 0.0, -jitter) * u32::try_from(r).map_or(0.0, f64::from);
+                if case % 89 == 0 {
+                    origin.y = f64::NAN;
+                }
                 let ray = Ray64 {
-                    origin: o
-                        + apart
-                        + DVec3::new(jitter, 0.0, -jitter)
-                            * u32::try_from(r).map_or(0.0, f64::from),
+                    origin,
                     dir,
                     t_min: if case % 5 == 0 {
                         f64::from(unit())

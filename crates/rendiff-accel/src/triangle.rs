@@ -667,8 +667,10 @@ mod tests {
 
     /// [`meets`], the test of a triangle given by its corners, is the
     /// walks' own test of the triangle in a pack's lane with the constants
-    /// a walk forms ([`RayPrecomp::of`]), bit for bit: the same
-    /// hit or miss, `t` and weights. Rays in every octant, with components
+    /// an any-hit walk forms ([`RayPrecomp::of`] with the segment filter's
+    /// bounds, over the walk's own reach), bit for bit: the same hit or
+    /// miss, `t` and weights, whichever lane holds it among other
+    /// triangles. Rays in every octant, with components
     /// that tie in magnitude (so the permutation's tie rule decides), that
     /// are ±0 or too small for `f32`; segments that end before, at and past
     /// the triangle; triangles hit inside, on an edge and missed.
@@ -695,7 +697,7 @@ mod tests {
             // Directions as camera and shadow rays make them: normalised in
             // f64, a few with a component tied to another's magnitude.
             let mut dir = raw.normalize();
-            if case % 13 == 0 {
+            if case % 13 == 0 && dir.x != 0.0 {
                 dir.y = dir.x.abs().copysign(dir.y);
             }
             let scale = 10f64.powf(next() * 6.0 - 3.0);
@@ -728,11 +730,20 @@ mod tests {
                 t_min: 0.0,
                 t_max,
             };
-            let pre = RayPrecomp::of::<false>(&ray, &WalkRay::new(&ray, ray.t_max));
+            // The constants as an any-hit walk forms them (its segment
+            // filter's, over a bound of its own), and the triangle in any
+            // lane of a pack with others beside it.
+            let bound = [ray.t_max, dist * 8.0, f64::INFINITY][(case % 3) as usize];
+            let pre = RayPrecomp::of::<true>(&ray, &WalkRay::new(&ray, bound));
+            let lane = (case / 3 % 4) as usize;
             let mut pack = TriPack::EMPTY;
-            pack.lanes = 1;
-            pack.set(0, tri);
-            let want = intersect_lane(&pre, pre.shear64(), &pack, 0, ray.t_min, ray.t_max);
+            pack.lanes = 4;
+            for l in 0..4 {
+                let shift = to_f32(DVec3::splat(scale * f64::from(l as u8 + 1)));
+                pack.set(l, tri.map(|v| v + shift));
+            }
+            pack.set(lane, tri);
+            let want = intersect_lane(&pre, pre.shear64(), &pack, lane, ray.t_min, ray.t_max);
             let got = meets(&ray, &tri);
             assert_eq!(
                 got.map(|h| (h.t64.to_bits(), h.t.to_bits(), h.b.map(f32::to_bits))),
