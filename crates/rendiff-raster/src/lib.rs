@@ -1183,7 +1183,7 @@ fn shade_pass(
             };
             let sy = band.y0;
             // With shadow rays, the visible samples are shaded in batches
-            // of eight: their shadow queries first, answered together
+            // of sixteen: their shadow queries first, answered together
             // (packets per light: neighbours' rays toward one light share
             // their walk), then each sample with its answers.
             let mut batch = ShadeBatch::default();
@@ -1263,8 +1263,12 @@ struct ShadeBatch {
 }
 
 impl ShadeBatch {
-    /// Samples per batch: one packet per light.
-    const SIZE: usize = 8;
+    /// Samples per batch: two packets per light. (Each batch's answer
+    /// groups its queries by light and calls the packet path once a
+    /// light, which reads the light's kept occluder and sets up its
+    /// arrays: batches of 16 instead of 8 made the bundled scenes' raster
+    /// renders 0.5–1.2 % fewer instructions, 32 no fewer again.)
+    const SIZE: usize = 16;
 
     fn push(
         &mut self,
