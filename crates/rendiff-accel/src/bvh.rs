@@ -3246,22 +3246,83 @@ mod tests {
             .collect()
     }
 
-    /// `Slab::test_v3` (x86-64-v3, where this machine has it) against
-    /// `Slab::test_lanes` on nodes and rays generated to hit their edge
-    /// cases: boxes flat on an axis, boxes whose planes pass through the
-    /// origin or sit on a ray's `t_min`, empty slots, direction components
-    /// of ±0, below 10⁻³⁰ and of either sign, origins off the `f64` ray's
-    /// (inflated slabs), bounds from 0 to +∞. The walk reads a test's
-    /// `t_near` only through comparisons, so the two must give the same
-    /// mask and, in its lanes, `t_near` equal as numbers.
+    /// One step of a xorshift64 stream (state non-zero).
+    fn xorshift_step(s: &mut u64) -> u64 {
+        *s ^= *s << 13;
+        *s ^= *s >> 7;
+        *s ^= *s << 17;
+        *s
+    }
+
     /// A xorshift64 stream from `seed` (non-zero): the generated cases of
     /// the tests below.
     fn xorshift(mut s: u64) -> impl FnMut() -> u64 {
-        move || {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            s
+        move || xorshift_step(&mut s)
+    }
+
+    /// The draws of the node tests' generated cases, from two xorshift64
+    /// streams.
+    struct Draws {
+        bits: u64,
+        other: u64,
+    }
+
+    impl Draws {
+        /// 24 random bits as a float in [0, 1).
+        fn unit(&mut self) -> f32 {
+            #[expect(clippy::cast_precision_loss, reason = "24 random bits: exact")]
+            let u = (xorshift_step(&mut self.bits) >> 40) as f32 / (1u64 << 24) as f32;
+            u
+        }
+
+        /// One of `n` choices.
+        fn choice(&mut self, n: u64) -> u64 {
+            (xorshift_step(&mut self.other) >> 32) % n
+        }
+
+        /// A point whose coordinates `coord` makes of a unit draw and one of
+        /// eight choices.
+        fn point(&mut self, coord: impl Fn(f32, u64) -> f32) -> Vec3 {
+            let mut c = || {
+                let u = self.unit();
+                coord(u, self.choice(8))
+            };
+            Vec3::new(c(), c(), c())
+        }
+
+        /// A direction whose components are ±0, ±10⁻³¹ (replaced in a
+        /// slab) or anywhere in [-1, 1).
+        fn direction(&mut self) -> DVec3 {
+            let mut c = || {
+                let u = self.unit();
+                f64::from(match self.choice(10) {
+                    0 => 0.0,
+                    1 => -0.0,
+                    2 => 1e-31,
+                    3 => -1e-31,
+                    _ => u * 2.0 - 1.0,
+                })
+            };
+            DVec3::new(c(), c(), c())
+        }
+
+        /// A node whose slots are boxes between two points of `coord`, 15 %
+        /// of them empty, 20 % of the rest flat on axis `flat`.
+        fn node(&mut self, coord: impl Fn(f32, u64) -> f32 + Copy, flat: usize) -> Node {
+            let mut n = empty_node();
+            for k in 0..WIDTH {
+                if self.unit() < 0.15 {
+                    continue;
+                }
+                let a = self.point(coord);
+                let mut b = self.point(coord);
+                if self.unit() < 0.2 {
+                    b[flat] = a[flat];
+                }
+                set_lane(&mut n, k, Aabb::from_min_max(a.min(b), a.max(b)));
+                n.used |= 1 << k;
+            }
+            n
         }
     }
 
@@ -3310,18 +3371,24 @@ mod tests {
         assert_eq!(seen, [0xFF, 0xFF], "every lane both set and clear");
     }
 
+    /// `Slab::test_v3` (x86-64-v3, where this machine has it) against
+    /// `Slab::test_lanes` on nodes and rays generated to hit their edge
+    /// cases: boxes flat on an axis, boxes whose planes pass through the
+    /// origin or sit on a ray's `t_min`, empty slots, direction components
+    /// of ±0, below 10⁻³⁰ and of either sign, origins off the `f64` ray's
+    /// (inflated slabs), bounds from 0 to +∞. The walk reads a test's
+    /// `t_near` only through comparisons, so the two must give the same
+    /// mask and, in its lanes, `t_near` equal as numbers.
     #[test]
     #[cfg(target_arch = "x86_64")]
     fn both_node_tests_decide_alike() {
         let pulp::Arch::V3(v3) = pulp::Arch::new() else {
             return;
         };
-        // 24 random bits as a float in [0, 1), and one of `n` choices.
-        let mut bits = xorshift(0x2545_F491_4F6C_DD1D);
-        #[expect(clippy::cast_precision_loss, reason = "24 random bits: exact")]
-        let mut unit = move || (bits() >> 40) as f32 / (1u64 << 24) as f32;
-        let mut other = xorshift(0x9E37_79B9_7F4A_7C15);
-        let mut choice = move |n: u64| (other() >> 32) % n;
+        let mut draw = Draws {
+            bits: 0x2545_F491_4F6C_DD1D,
+            other: 0x9E37_79B9_7F4A_7C15,
+        };
         // A coordinate: mostly in [-2, 2), sometimes exactly 0, ±1.
         let coord = |u: f32, c: u64| match c {
             0 => 0.0,
@@ -3331,54 +3398,18 @@ mod tests {
         };
         let mut masks = 0u32;
         for case in 0..200_000u32 {
-            let mut n = empty_node();
-            for k in 0..WIDTH {
-                if unit() < 0.15 {
-                    continue;
-                }
-                let a = Vec3::new(
-                    coord(unit(), choice(8)),
-                    coord(unit(), choice(8)),
-                    coord(unit(), choice(8)),
-                );
-                let mut b = Vec3::new(
-                    coord(unit(), choice(8)),
-                    coord(unit(), choice(8)),
-                    coord(unit(), choice(8)),
-                );
-                if unit() < 0.2 {
-                    // Flat on one axis.
-                    b.y = a.y;
-                }
-                set_lane(&mut n, k, Aabb::from_min_max(a.min(b), a.max(b)));
-                n.used |= 1 << k;
-            }
-            let comp = |u: f32, c: u64| match c {
-                0 => 0.0,
-                1 => -0.0,
-                2 => 1e-31,
-                3 => -1e-31,
-                _ => u * 2.0 - 1.0,
-            };
-            let dir = DVec3::new(
-                f64::from(comp(unit(), choice(10))),
-                f64::from(comp(unit(), choice(10))),
-                f64::from(comp(unit(), choice(10))),
-            );
+            let n = draw.node(coord, 1);
+            let dir = draw.direction();
             let dir = if dir == DVec3::ZERO { DVec3::X } else { dir };
             // An origin that is not an `f32` point half the time (the
             // `f32` ray strays from it: inflated slabs).
             let jitter = if case % 2 == 0 { 1e-9 } else { 0.0 };
-            let origin = DVec3::new(
-                f64::from(coord(unit(), choice(8))) + jitter,
-                f64::from(coord(unit(), choice(8))),
-                f64::from(coord(unit(), choice(8))) - jitter,
-            );
+            let origin = to_f64(draw.point(coord)) + DVec3::new(jitter, 0.0, -jitter);
             let ray = Ray64 {
                 origin,
                 dir,
                 t_min: if case % 3 == 0 {
-                    f64::from(unit())
+                    f64::from(draw.unit())
                 } else {
                     0.0
                 },
@@ -3389,7 +3420,7 @@ mod tests {
             let t_max = match case % 4 {
                 0 => f32::INFINITY,
                 1 => 0.0,
-                _ => unit() * 4.0,
+                _ => draw.unit() * 4.0,
             };
             let (lanes, lanes_tn) = slab.test_lanes(Boxes::of(pulp::Scalar::new()), &n, t_max);
             let (wide, wide_tn) = slab.test_v3(v3, &Planes::of(&slab), &n, t_max);
@@ -3427,11 +3458,10 @@ mod tests {
         let pulp::Arch::V3(v3) = pulp::Arch::new() else {
             return;
         };
-        let mut bits = xorshift(0x51A7_C0DE_2026_1207);
-        #[expect(clippy::cast_precision_loss, reason = "24 random bits: exact")]
-        let mut unit = move || (bits() >> 40) as f32 / (1u64 << 24) as f32;
-        let mut other = xorshift(0x0DDB_A11C_AFE5_EED5);
-        let mut choice = move |n: u64| (other() >> 32) % n;
+        let mut draw = Draws {
+            bits: 0x51A7_C0DE_2026_1207,
+            other: 0x0DDB_A11C_AFE5_EED5,
+        };
         // A coordinate on a coarse grid (offsets of exactly ±0), or anywhere.
         let coord = |u: f32, c: u64| match c {
             0 => -1.0,
@@ -3440,55 +3470,20 @@ mod tests {
             3 => 0.5,
             _ => u * 4.0 - 2.0,
         };
-        let comp = |u: f32, c: u64| match c {
-            0 => 0.0,
-            1 => -0.0,
-            2 => 1e-31,
-            3 => -1e-31,
-            _ => u * 2.0 - 1.0,
-        };
         let (mut seen, mut one_sign, mut mixed) = (0u32, 0u32, 0u32);
         for case in 0..100_000u32 {
-            let mut n = empty_node();
-            for k in 0..WIDTH {
-                if unit() < 0.15 {
-                    continue;
-                }
-                let a = Vec3::new(
-                    coord(unit(), choice(8)),
-                    coord(unit(), choice(8)),
-                    coord(unit(), choice(8)),
-                );
-                let mut b = Vec3::new(
-                    coord(unit(), choice(8)),
-                    coord(unit(), choice(8)),
-                    coord(unit(), choice(8)),
-                );
-                if unit() < 0.2 {
-                    b.z = a.z;
-                }
-                set_lane(&mut n, k, Aabb::from_min_max(a.min(b), a.max(b)));
-                n.used |= 1 << k;
-            }
+            let n = draw.node(coord, 2);
             // A packet: one base direction and origin; each ray strays from
             // them a little (coherent: the signs mostly shared), or is
             // drawn anew (the signs mixed).
-            let base = DVec3::new(
-                f64::from(comp(unit(), choice(10))),
-                f64::from(comp(unit(), choice(10))),
-                f64::from(comp(unit(), choice(10))),
-            );
-            let o = DVec3::new(
-                f64::from(coord(unit(), choice(8))),
-                f64::from(coord(unit(), choice(8))),
-                f64::from(coord(unit(), choice(8))),
-            );
+            let base = draw.direction();
+            let o = to_f64(draw.point(coord));
             let spread = [0.0, 1e-3, 0.1, 2.0][(case % 4) as usize];
             let slabs: [Slab; PACKET] = std::array::from_fn(|r| {
                 let stray = DVec3::new(
-                    f64::from(unit() - 0.5),
-                    f64::from(unit() - 0.5),
-                    f64::from(unit() - 0.5),
+                    f64::from(draw.unit() - 0.5),
+                    f64::from(draw.unit() - 0.5),
+                    f64::from(draw.unit() - 0.5),
                 ) * spread;
                 let dir = if r % 3 == 2 { base } else { base + stray };
                 let dir = if dir == DVec3::ZERO { DVec3::Y } else { dir };
@@ -3496,11 +3491,7 @@ mod tests {
                 // Origins apart (as shadow rays' are), so that a plane can
                 // lie between the packet's least and greatest origin.
                 let apart = if case % 3 == 0 {
-                    DVec3::new(
-                        f64::from(coord(unit(), choice(8))),
-                        f64::from(coord(unit(), choice(8))),
-                        f64::from(coord(unit(), choice(8))),
-                    ) * 0.5
+                    to_f64(draw.point(coord)) * 0.5
                 } else {
                     DVec3::ZERO
                 };
@@ -3517,7 +3508,7 @@ mod tests {
                     origin,
                     dir,
                     t_min: if case % 5 == 0 {
-                        f64::from(unit())
+                        f64::from(draw.unit())
                     } else {
                         0.0
                     },
@@ -3525,10 +3516,10 @@ mod tests {
                 };
                 Slab::new(&WalkRay::new(&ray, 10.0))
             });
-            let t_max: [f32; PACKET] = std::array::from_fn(|_| match choice(4) {
+            let t_max: [f32; PACKET] = std::array::from_fn(|_| match draw.choice(4) {
                 0 => f32::INFINITY,
                 1 => 0.0,
-                _ => unit() * 4.0,
+                _ => draw.unit() * 4.0,
             });
             let wide = PacketSlab::new(&slabs, &t_max);
             let lanes = wide.children_of_lanes(Boxes::of(pulp::Scalar::new()), &n);

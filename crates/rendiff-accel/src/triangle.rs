@@ -660,6 +660,16 @@ mod tests {
         }
     }
 
+    /// A triangle of `f32` corners drawn by `next` (values in [0, 1)) in
+    /// the cube of side `scale` centred on `c`.
+    fn triangle_around(c: DVec3, scale: f64, next: &mut impl FnMut() -> f64) -> [Vec3; 3] {
+        let mut corner = || {
+            let (r, s, t) = (next(), next(), next());
+            to_f32(c + DVec3::new(r - 0.5, s - 0.5, t - 0.5) * scale)
+        };
+        [corner(), corner(), corner()]
+    }
+
     /// [`intersect`] with the ray's own `f64` shear.
     fn hit_of(pre: &RayPrecomp, v: &[Vec3; 3], t_min: f64, t_max: f64) -> Option<TriHit> {
         intersect(pre, pre.shear64(), v, t_min, t_max)
@@ -702,13 +712,7 @@ mod tests {
             }
             let scale = 10f64.powf(next() * 6.0 - 3.0);
             let c = DVec3::new(next() - 0.5, next() - 0.5, next() - 0.5) * scale * 4.0;
-            let p =
-                |r: f64, s: f64, t: f64| to_f32(c + DVec3::new(r - 0.5, s - 0.5, t - 0.5) * scale);
-            let tri = [
-                p(next(), next(), next()),
-                p(next(), next(), next()),
-                p(next(), next(), next()),
-            ];
+            let tri = triangle_around(c, scale, &mut next);
             let v = tri.map(to_f64);
             // A target inside, on an edge, or beside the triangle.
             let (a, b) = (next(), next());
@@ -845,13 +849,7 @@ mod tests {
             let scale = 10f64.powf(next() * 9.0 - 3.0);
             let offset = 10f64.powf(next() * 6.0) * (next() - 0.5);
             let c = DVec3::new(offset, offset * 0.3, -offset * 0.7);
-            let p =
-                |r: f64, s: f64, t: f64| to_f32(c + DVec3::new(r - 0.5, s - 0.5, t - 0.5) * scale);
-            let tri = [
-                p(next(), next(), next()),
-                p(next(), next(), next()),
-                p(next(), next(), next()),
-            ];
+            let tri = triangle_around(c, scale, &mut next);
             // A target on an edge or at a vertex, nudged by a few ulps.
             let v = tri.map(to_f64);
             let (i, j) = ((case % 3) as usize, ((case + 1) % 3) as usize);
