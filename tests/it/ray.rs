@@ -1702,3 +1702,283 @@ fn the_light_buffer_survives_non_finite_corners() {
         assert_eq!(got, want, "corner {bad}");
     }
 }
+
+/// Barycentric weights of `p` in the triangle `v` (in its plane).
+fn weights_in(v: [DVec3; 3], p: DVec3) -> [f64; 3] {
+    let n = (v[1] - v[0]).cross(v[2] - v[0]);
+    let area = n.length_squared();
+    let a = (v[2] - v[1]).cross(p - v[1]).dot(n) / area;
+    let b = (v[0] - v[2]).cross(p - v[2]).dot(n) / area;
+    [a, b, 1.0 - a - b]
+}
+
+/// A query answered as it is added (`ShadowBatch::add_with`: the shadow
+/// cache's triangle certainly stops it) gets the walk's answer. Each case
+/// is an occluder and a large receiver through a point on the line from
+/// the light through a corner of the occluder, a point on one of its
+/// edges or inside it, before or behind it; scales from 10⁻³ to 10³, far
+/// from the origin or near it; lights from 10⁻⁹ to 10³ of the occluder's
+/// size off its plane. Before each sample, a batch of one sample on a
+/// small triangle behind the occluder's centre puts the occluder in the
+/// cache (and has its certifier made); then each sample,
+/// nudged off the point by 10⁻¹³ to 10⁻¹ of the scale (across the
+/// shadow's edges and the occluder's plane), with and without an error
+/// bound on its position, is a batch of its own: its answer, certified or
+/// traced, must be the single-ray walk's. Nearly every query well inside
+/// the shadow must be certified.
+#[test]
+fn queries_answered_as_added_are_the_walks() {
+    use rendiff::accel::ShadowBatch;
+    use rendiff::color::Rgb;
+    use rendiff::math::Bary;
+    use rendiff::shade::{Light, LightKind, ShadowQuery};
+    let mut rng = Rng(0x0000_ddc0_ffee_5eed);
+    let (mut certified, mut inside, mut inside_certified) = (0usize, 0usize, 0usize);
+    for case in 0..3000usize {
+        let scale = 10f64.powf(rng.range(-3.0, 3.0));
+        let center = random_dir(&mut rng).as_dvec3() * scale * rng.range(0.0, 40.0);
+        let t: [DVec3; 3] = std::array::from_fn(|_| {
+            to_f64(to_f32(center + random_dir(&mut rng).as_dvec3() * scale))
+        });
+        let Some(n) = (t[1] - t[0]).cross(t[2] - t[0]).try_normalize() else {
+            continue;
+        };
+        let mid = (t[0] + t[1] + t[2]) / 3.0;
+        let height = scale * 10f64.powf(rng.range(-9.0, 3.0));
+        let light = to_f32(
+            mid + n * height + random_dir(&mut rng).as_dvec3() * scale * rng.range(0.0, 3.0),
+        );
+        let l = to_f64(light);
+        // A point of the occluder: a corner, on an edge, or inside.
+        let w: [f64; 3] = match case % 3 {
+            0 => {
+                let mut w = [0.0; 3];
+                w[case / 3 % 3] = 1.0;
+                w
+            }
+            1 => {
+                let a = rng.f64();
+                let mut w = [a, 1.0 - a, 0.0];
+                w.rotate_left(case / 3 % 3);
+                w
+            }
+            _ => {
+                let w = [rng.f64(), rng.f64(), rng.f64()];
+                let s = w[0] + w[1] + w[2];
+                w.map(|x| x / s)
+            }
+        };
+        let x = t[0] * w[0] + t[1] * w[1] + t[2] * w[2];
+        // Behind the occluder (or, one case in four, before it).
+        let along = if case % 4 == 3 {
+            rng.range(0.2, 1.0)
+        } else {
+            rng.range(1.0, 4.0)
+        };
+        let p0 = l + (x - l) * along;
+        let rn = random_dir(&mut rng).as_dvec3();
+        let u = rn.any_orthonormal_vector();
+        let v = rn.cross(u);
+        let big = scale * 100.0;
+        let r = [
+            p0 + u * big,
+            p0 - u * big * 0.5 + v * big,
+            p0 - u * big * 0.5 - v * big,
+        ]
+        .map(to_f32);
+        let rd = r.map(to_f64);
+        // A small triangle behind the occluder, across the line from the
+        // light through its centre: where the priming sample lies.
+        let axis = (mid - l).normalize();
+        let (qa, qb) = (
+            axis.any_orthonormal_vector(),
+            axis.cross(axis.any_orthonormal_vector()),
+        );
+        let qc = l + (mid - l) * 2.0;
+        let q = [
+            qc + qa * scale,
+            qc - qa * scale * 0.5 + qb * scale,
+            qc - qa * scale * 0.5 - qb * scale,
+        ]
+        .map(to_f32);
+        let mut scene = TriScene::from_triangles(camera(), &[r, t.map(to_f32), q]);
+        scene.lights.push(Light {
+            kind: LightKind::Point { position: light },
+            color: Rgb::WHITE,
+            shadowless: false,
+            fade: None,
+        });
+        let accel = Accel::new(&scene, AccelOptions::default());
+        let rays = ShadowRays::new(&accel);
+        let ctx = scene.shade_context(0.0, true);
+        let at = |p: DVec3| {
+            let b = weights_in(rd, p).map(|x| x as f32);
+            scene.surface_at(0, Bary(b))
+        };
+        let prime = scene.surface_at(2, Bary([1.0 / 3.0; 3]));
+        let mut batch = ShadowBatch::default();
+        for k in 0..24 {
+            // The occluder into the cache (and its certifier made).
+            for d in [prime.ng, -prime.ng] {
+                let _ = batch.add_with(&ctx, &prime, d, &rays);
+            }
+            batch.answer(&rays);
+            batch.clear();
+            let nudge = scale * 10f64.powf(rng.range(-13.0, -1.0));
+            let p = p0 + (u * rng.range(-1.0, 1.0) + v * rng.range(-1.0, 1.0)) * nudge;
+            let mut sp = at(p);
+            if k % 2 == 1 {
+                sp.p_error = Vec3::ZERO;
+            }
+            // Well inside the shadow: behind the occluder, the line from
+            // the light more than a tenth of the occluder from its edges.
+            let deep = case % 3 == 2
+                && along > 1.5
+                && w.iter().all(|&x| x > 0.1)
+                && nudge < scale * 1e-3
+                && height > scale * 0.1;
+            for d in [sp.ng, -sp.ng] {
+                let _ = batch.add_with(&ctx, &sp, d, &rays);
+            }
+            let answered_as_added = batch.answered_as_added();
+            batch.answer(&rays);
+            let mut queries: Vec<ShadowQuery> = Vec::new();
+            for d in [sp.ng, -sp.ng] {
+                let _ = rendiff::shade::shadow_queries(&ctx, &sp, d, |q| queries.push(q));
+            }
+            let mut answers = Vec::new();
+            for k in 0..batch.len() {
+                answers.extend(batch.answered(k, &rays).answers.iter().map(|a| a.1));
+            }
+            let walked: Vec<Rgb> = queries.iter().map(|q| rays.transmittance(q)).collect();
+            assert_eq!(
+                answers, walked,
+                "case {case}, sample {k} ({answered_as_added} answered as added)"
+            );
+            certified += answered_as_added;
+            if deep {
+                inside += queries.len();
+                inside_certified += answered_as_added;
+            }
+            batch.clear();
+        }
+    }
+    assert!(certified > 12_000, "{certified} answered as added");
+    assert!(
+        inside_certified * 10 > inside * 9,
+        "{inside_certified} of {inside} queries well inside the shadow answered as added"
+    );
+}
+
+/// A batch filled by `add_with` answers every sample as one filled by
+/// `add` does: the same answers in the same order, and the same count of
+/// shadow rays cast. A floor under a large occluder (two triangles) and a
+/// grid of small ones, toward a parallel light and two point lights (one
+/// in the large occluder's plane, which it does not shadow), in batches
+/// of 1 to 20 samples along rows (lit, shadowed and across shadows'
+/// edges), on one `ShadowRays` each for the whole frame. (The parallel
+/// light first: a sample's first query is formed before its second is
+/// answered as added.) Many queries must be answered as they are added.
+#[test]
+fn batches_answer_alike_with_and_without_answers_as_added() {
+    use rendiff::accel::ShadowBatch;
+    use rendiff::color::Rgb;
+    use rendiff::math::Bary;
+    use rendiff::shade::{Light, LightKind};
+    let quad = |a: Vec3, b: Vec3, c: Vec3, d: Vec3| [[a, b, c], [a, c, d]];
+    let mut tris: Vec<[Vec3; 3]> = Vec::new();
+    tris.extend(quad(
+        Vec3::new(-4.0, 0.0, -4.0),
+        Vec3::new(-4.0, 0.0, 4.0),
+        Vec3::new(4.0, 0.0, 4.0),
+        Vec3::new(4.0, 0.0, -4.0),
+    ));
+    tris.extend(quad(
+        Vec3::new(-1.0, 1.0, -1.0),
+        Vec3::new(-1.0, 1.0, 1.0),
+        Vec3::new(1.0, 1.0, 1.0),
+        Vec3::new(1.0, 1.0, -1.0),
+    ));
+    for i in 0..12 {
+        for j in 0..12 {
+            let (x, z) = (0.5 + 0.25 * i as f32, -1.5 + 0.25 * j as f32);
+            tris.extend(quad(
+                Vec3::new(x, 2.0, z),
+                Vec3::new(x, 2.0, z + 0.2),
+                Vec3::new(x + 0.2, 2.0, z + 0.2),
+                Vec3::new(x + 0.2, 2.0, z),
+            ));
+        }
+    }
+    let mut scene = TriScene::from_triangles(camera(), &tris);
+    for kind in [
+        LightKind::Parallel {
+            direction: -Vec3::new(0.15, 1.0, 0.1).normalize(),
+        },
+        LightKind::Point {
+            position: Vec3::new(0.3, 5.0, 0.2),
+        },
+        LightKind::Point {
+            position: Vec3::new(-2.5, 1.0, 0.5),
+        },
+    ] {
+        scene.lights.push(Light {
+            kind,
+            color: Rgb::WHITE,
+            shadowless: false,
+            fade: None,
+        });
+    }
+    let accel = Accel::new(&scene, AccelOptions::default());
+    let (rays_a, rays_b) = (ShadowRays::new(&accel), ShadowRays::new(&accel));
+    let ctx = scene.shade_context(0.0, true);
+    let (mut with, mut plain) = (ShadowBatch::default(), ShadowBatch::default());
+    let mut rng = Rng(0x00ba_7c4e_5a11_7e57);
+    let (mut certified, mut queries, mut blocked) = (0usize, 0usize, 0usize);
+    let down = Vec3::new(0.05, -1.0, 0.02).normalize();
+    for zi in 0..48 {
+        let z = -2.5 + 0.104 * zi as f32;
+        let mut xi = 0;
+        while xi < 96 {
+            let n = 1 + rng.below(20) as usize;
+            for _ in 0..n.min(96 - xi) {
+                let x = -2.0 + 0.057 * xi as f32;
+                // The floor's two triangles meet on x = z.
+                let (tri, b) = if z >= x {
+                    (0, Bary([(4.0 - z) / 8.0, (z - x) / 8.0, (x + 4.0) / 8.0]))
+                } else {
+                    (1, Bary([(4.0 - x) / 8.0, (z + 4.0) / 8.0, (x - z) / 8.0]))
+                };
+                let sp = scene.surface_at(tri, b);
+                let na = with.add_with(&ctx, &sp, down, &rays_a);
+                let nb = plain.add(&ctx, &sp, down);
+                assert_eq!(
+                    na.to_array().map(f32::to_bits),
+                    nb.to_array().map(f32::to_bits)
+                );
+                xi += 1;
+            }
+            certified += with.answered_as_added();
+            with.answer(&rays_a);
+            plain.answer(&rays_b);
+            assert_eq!(with.len(), plain.len());
+            for k in 0..plain.len() {
+                let (a, b) = (with.answered(k, &rays_a), plain.answered(k, &rays_b));
+                assert_eq!(a.answers, b.answers, "row {zi}, sample {k}");
+                queries += b.answers.len();
+                blocked += b.answers.iter().filter(|t| t.1 == Rgb::BLACK).count();
+            }
+            with.clear();
+            plain.clear();
+        }
+    }
+    assert_eq!(rays_a.cast(), rays_b.cast());
+    assert!(
+        blocked > queries / 5 && blocked < queries * 4 / 5,
+        "{blocked} of {queries} blocked"
+    );
+    assert!(
+        certified * 8 > blocked,
+        "{certified} of {blocked} blocked queries answered as added"
+    );
+}

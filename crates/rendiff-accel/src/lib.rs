@@ -122,7 +122,14 @@ pub struct Accel<'s> {
     opaque_triangles_only: bool,
     /// The lights' light buffers (where every caster is a triangle).
     light_buffers: LightBuffers,
+    /// This structure's number, unique in the process: what a
+    /// [`ShadowBatch`]'s certifiers were made for (an address could be a
+    /// later structure's).
+    id: u64,
 }
+
+/// The next [`Accel`]'s number.
+static NEXT_ACCEL: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
 
 impl<'s> Accel<'s> {
     /// Builds the structure for a scene.
@@ -213,6 +220,7 @@ impl<'s> Accel<'s> {
             any_caster,
             opaque_triangles_only,
             light_buffers,
+            id: NEXT_ACCEL.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
         }
     }
 
@@ -766,6 +774,189 @@ impl Occluder {
     }
 }
 
+/// What certifies, from a surface point alone, that a point light's
+/// shadow ray from it is stopped by one triangle: the shadow cache's, for
+/// [`ShadowBatch::add_with`]. Formed once per cache entry.
+///
+/// **Why its answer is the packets'.** A query's ray runs from the offset
+/// origin `o` (`offset_origin`: within `δ` of the surface point `P` on
+/// every axis, `δ` bounded below from `P`'s error bound and normal) to the
+/// light `L`, and any accepted triangle but its skipped one that the `f64`
+/// test meets stops it. The triangle `T` here is accepted (the entry's
+/// `casts_on_point`: it casts, and its plane does not pass through `L`)
+/// and is not the sample's own (`sp.prim`), so never the skipped one; it
+/// remains to show that the test meets it. Let `a_i = V_i − L` and, for
+/// each edge `(i, j)` with opposite corner `k`, `n_ij = σ·a_i × a_j`, `σ`
+/// the sign of `a_0 · (a_1 × a_2)` (so that `n_ij · a_k > 0`). A point
+/// `o` with `n_ij · (o − L) > 0` for all three edges lies in the open cone
+/// from `L` through `T`; if it also lies strictly on the far side of
+/// `T`'s plane from `L`, the segment crosses that plane at a point `X`
+/// strictly inside `T`, strictly between `o` and `L`.
+///
+/// The `f64` test errs by rounding: its edge functions, 2-D cross
+/// products of the sheared corners, carry an error below about 20 ulp of
+/// the translated coordinates squared (under `6S`, where `S` bounds every
+/// coordinate of `o`, `L` and the corners: the same accounting as the
+/// light buffer's, `light_buffer`), under `8·10⁻¹⁴·S²`. An edge function
+/// is `|V_j' − V_i'|` times the distance of the ray's point from the
+/// edge's line, both in the ray's projection. Along a direction at angle
+/// `θ` from `T`'s normal the projection shrinks lengths in `T`'s plane by
+/// at most `cos θ`, so the edge function is at least `|V_j − V_i| ·
+/// cos²θ · dist(X, plane through L, V_i, V_j)` (the distance from `X` to
+/// that plane is at most its distance from the edge's line). And
+/// `dist(X, plane) = dist(o, plane)·|X − L|/|o − L|`, with `|X − L| ≥ h_L`
+/// (the light's distance from `T`'s plane) and `cos θ = (h_L + h_o)/|o −
+/// L| ≥ h_L/|o − L|`. So each edge function's sign is certain when
+/// `dist(o, plane_ij)·h_L³·|V_j − V_i|/|o − L|³ > 10⁻¹¹·S²` (125 times the
+/// error above); the three then agree, and `det`, their sum, is not zero.
+/// The test's distance is `|X − o| ≥ h_o` and it ends `|L − X| ≥ h_L`
+/// before `t_max = |L − o|`; both above `10⁻⁹·S` put the hit beyond the
+/// test's own bound `δt` (a few ulp of `6S`) and before its end. Every
+/// quantity is bounded conservatively: `dist(o, ·)` by the value at `P`
+/// less `δ` times the normal's 1-norm and `10⁻¹³` times the absolute
+/// products (the `f64` rounding of these few operations is under
+/// `10⁻¹⁵` of them), `|o − L|` by the 1-norm of `P − L` plus `3δ`, and
+/// the per-triangle factors with a relative allowance far above their
+/// rounding. A non-finite input fails a comparison and certifies nothing.
+/// (As for the light buffer, this assumes a real mesh's triangles, not a
+/// sliver whose edge is below the rounding of its coordinates.)
+#[derive(Clone, Copy, Debug)]
+struct Certifier {
+    id: u32,
+    light: DVec3,
+    v0: DVec3,
+    /// Per edge: `n_ij`, its absolute products (`|a_i| × |a_j|`, which
+    /// bound `n_ij`'s and `n_ij · Δ`'s rounding), its 1-norm bound, and
+    /// `h_L³·|V_j − V_i| / |n_ij|` rounded down.
+    edges: [(DVec3, DVec3, f64, f64); 3],
+    /// `T`'s normal pointing away from the light, its absolute products,
+    /// 1-norm bound and length rounded up.
+    normal: (DVec3, DVec3, f64, f64),
+    /// The light's distance from `T`'s plane, rounded down.
+    h_light: f64,
+    /// The largest coordinate of the light and the corners.
+    scale: f64,
+}
+
+/// The absolute products of `a × b`: `|a_y b_z| + |a_z b_y|`, and so on.
+#[inline(always)]
+fn abs_cross(a: DVec3, b: DVec3) -> DVec3 {
+    let (a, b) = (a.abs(), b.abs());
+    DVec3::new(
+        a.y * b.z + a.z * b.y,
+        a.z * b.x + a.x * b.z,
+        a.x * b.y + a.y * b.x,
+    )
+}
+
+/// The `10⁻¹³` relative allowance for the rounding of a few `f64`
+/// operations (under `10⁻¹⁵`), see [`Certifier`].
+const CERTIFY_ROUNDING: f64 = 1e-13;
+
+impl Certifier {
+    /// The certifier of the shadow cache's `entry` for `light` (see
+    /// [`ShadowRays`]); `None` unless the light is a point light, the
+    /// entry's triangle is accepted for rays toward it, and the light lies
+    /// clearly off its plane and out of the planes of its edges.
+    fn new(scene: &TriScene, light: usize, entry: u64) -> Option<Certifier> {
+        #[expect(clippy::cast_possible_truncation, reason = "the low word")]
+        let id = entry as u32;
+        let casts_on_point = entry >> 32 & 1 == 1;
+        let rendiff_core::shade::LightKind::Point { position } = scene.lights.get(light)?.kind
+        else {
+            return None;
+        };
+        if !casts_on_point || id as usize >= scene.len() {
+            return None;
+        }
+        let l = to_f64(position);
+        let v = scene.triangle(id).map(to_f64);
+        let a = v.map(|x| x - l);
+        let triple = a[0].dot(a[1].cross(a[2]));
+        let triple_bound = CERTIFY_ROUNDING * a[0].abs().dot(abs_cross(a[1], a[2]));
+        // (Written as tests that a NaN fails.)
+        let oriented = triple.abs() > triple_bound;
+        if !oriented {
+            return None;
+        }
+        let sigma = triple.signum();
+        let e1 = v[1] - v[0];
+        let e2 = v[2] - v[0];
+        let nt = e1.cross(e2);
+        let nt_abs = abs_cross(e1, e2);
+        let to_light = l - v[0];
+        let g_light = nt.dot(to_light);
+        let g_bound = CERTIFY_ROUNDING * nt_abs.dot(to_light.abs());
+        let nt_len = nt.length() * (1.0 + CERTIFY_ROUNDING);
+        let h_light = (g_light.abs() - g_bound) / nt_len * (1.0 - CERTIFY_ROUNDING);
+        let off_plane = h_light > 0.0;
+        if !off_plane {
+            return None;
+        }
+        let slack = 1.0 + CERTIFY_ROUNDING;
+        let edge = |i: usize, j: usize| {
+            let n = a[i].cross(a[j]) * sigma;
+            let n_abs = abs_cross(a[i], a[j]);
+            let n_len = n.length() * slack;
+            let side = (v[j] - v[i]).length() * (1.0 - CERTIFY_ROUNDING);
+            let factor = h_light * h_light * h_light * side / n_len * (1.0 - CERTIFY_ROUNDING);
+            (n, n_abs, (n_abs.x + n_abs.y + n_abs.z) * slack, factor)
+        };
+        let far = -g_light.signum();
+        let scale = v
+            .iter()
+            .fold(l.abs().max_element(), |m, p| m.max(p.abs().max_element()));
+        Some(Certifier {
+            id,
+            light: l,
+            v0: v[0],
+            edges: [edge(0, 1), edge(1, 2), edge(2, 0)],
+            normal: (
+                nt * far,
+                nt_abs,
+                (nt_abs.x + nt_abs.y + nt_abs.z) * slack,
+                nt_len,
+            ),
+            h_light,
+            scale,
+        })
+    }
+
+    /// `true` when the shadow ray toward the light from `sp` (from its
+    /// offset origin, as `shadow_query` forms it) is certainly stopped by
+    /// the triangle (see [`Certifier`]).
+    #[inline(always)]
+    fn stops(&self, sp: &SurfacePoint) -> bool {
+        if sp.prim == self.id {
+            return false;
+        }
+        let p = to_f64(sp.p);
+        let spread = to_f64(sp.ng).abs().dot(to_f64(sp.p_error));
+        let p_max = p.abs().max_element();
+        // |o − P| on every axis: the offset (`ng·d` with `d` the f32 dot,
+        // rounded) and its rounding and one-ulp bump (each under 2⁻²³ of
+        // the coordinate), with room.
+        let delta = 1.1 * spread + (p_max + spread) * (1.0 / f64::from(1u32 << 20));
+        let s = p_max.max(self.scale) + delta;
+        let d = p - self.light;
+        let d_abs = d.abs();
+        let reach = d_abs.x + d_abs.y + d_abs.z + 3.0 * delta;
+        let need = 1e-11 * s * s * reach * reach * reach;
+        for (n, n_abs, n1, factor) in &self.edges {
+            let side = n.dot(d) - CERTIFY_ROUNDING * n_abs.dot(d_abs) - n1 * delta;
+            let inside = side * factor > need;
+            if !inside {
+                return false;
+            }
+        }
+        let (n, n_abs, n1, n_len) = &self.normal;
+        let q = p - self.v0;
+        let beyond = n.dot(q) - CERTIFY_ROUNDING * n_abs.dot(q.abs()) - n1 * delta;
+        let margin = 1e-9 * s;
+        self.h_light > margin && beyond > margin * n_len
+    }
+}
+
 /// Answers a packet's rays into `blocked` through the light buffers: a
 /// ray whose cell is empty is lit, one whose cell lists a few triangles
 /// is tested against them (the walks' leaf test), and the rest walk the
@@ -929,15 +1120,87 @@ fn walk_some(
 /// Holds its buffers from batch to batch.
 #[derive(Debug, Default)]
 pub struct ShadowBatch {
-    /// Where each sample's queries start in `queries` (and `answers`).
+    /// Where each sample's answers start in `answers`.
     starts: Vec<usize>,
-    /// The queries.
+    /// The queries formed (those not answered as they were added).
     queries: Vec<ShadowQuery>,
-    /// Each query's light, and its answer once [`ShadowBatch::answer`] ran.
+    /// Where each query's answer is in `answers`, once one query was
+    /// answered as it was added.
+    slots: Vec<usize>,
+    /// Each query's light, and its answer once [`ShadowBatch::answer`] ran
+    /// (or as it was added: [`ShadowBatch::add_with`]).
     answers: Vec<(usize, Rgb)>,
+    /// Queries answered as they were added since the last clear (while
+    /// none is, `slots` is empty: each query's answer has its index).
+    certified: usize,
+    /// Lights whose certifiers [`ShadowBatch::add_with`] tries (see
+    /// [`ShadowBatch::arm`]): where none is, it is [`ShadowBatch::add`].
+    armed: usize,
+    /// Per light (below [`CERTIFIED_LIGHTS`]): the shadow cache's entry
+    /// its certifier was made for (`u64::MAX`: none yet), and the
+    /// certifier.
+    certifiers: Vec<CertifierSlot>,
     order: Vec<usize>,
     group: Vec<ShadowQuery>,
     group_answers: Vec<Rgb>,
+}
+
+/// Lights whose queries [`ShadowBatch::add_with`] may answer as they are
+/// added (a certifier each).
+const CERTIFIED_LIGHTS: usize = 64;
+
+/// Queries a light's certifier may fail to answer in one batch before the
+/// rest of the batch's queries toward that light go straight to the
+/// packets: outside the triangle's shadow it stops no ray, and each try
+/// costs about a hundred instructions.
+const CERTIFIER_MISSES: u8 = 1;
+
+/// A light's [`Certifier`] in a [`ShadowBatch`]. A new shadow cache entry
+/// gets its certifier at once while the light's certifiers answer
+/// queries; once one answered none, only an entry that stayed the cache's
+/// over two answers in a row does (a triangle whose shadow covers more
+/// than a packet, as a box's face on a floor). Where the cache's triangle
+/// changes from packet to packet (the small triangles of a tessellated
+/// sphere's shadow, a mesh's self-shadowing), making a certifier at every
+/// entry (about 400 instructions) cost more than it saved.
+#[derive(Clone, Copy, Debug)]
+struct CertifierSlot {
+    /// The cache's entry at the last answer (`u64::MAX`: none).
+    seen: u64,
+    /// The entry the certifier was made for.
+    made_for: u64,
+    /// The structure ([`Accel`]'s number) the certifier was made with.
+    accel: u64,
+    /// Tries that failed in this batch.
+    misses: u8,
+    /// Queries the certifier answered (up to `u8::MAX`).
+    answered: u8,
+    /// Tried in this batch: the light's cache holds a triangle, and the
+    /// certifier has misses left.
+    live: bool,
+    certifier: Option<Certifier>,
+}
+
+impl Default for CertifierSlot {
+    fn default() -> Self {
+        CertifierSlot {
+            seen: u64::MAX,
+            made_for: u64::MAX,
+            accel: u64::MAX,
+            misses: 0,
+            answered: 0,
+            live: false,
+            certifier: None,
+        }
+    }
+}
+
+impl CertifierSlot {
+    /// Whether the light's certifier answered a query (or it has none
+    /// yet): then a new cache entry gets its certifier at once.
+    fn productive(&self) -> bool {
+        self.certifier.is_none() || self.answered != 0
+    }
 }
 
 impl ShadowBatch {
@@ -945,17 +1208,164 @@ impl ShadowBatch {
     /// `d` ([`rendiff_core::shade::shadow_queries`]); returns the shading
     /// normal for [`rendiff_core::shade::shade_with_normal`].
     pub fn add(&mut self, ctx: &ShadeContext<'_>, sp: &SurfacePoint, d: Vec3) -> Vec3 {
-        self.starts.push(self.queries.len());
+        self.starts.push(self.answers.len());
         rendiff_core::shade::shadow_queries(ctx, sp, d, |q| {
+            if self.certified != 0 {
+                self.slots.push(self.answers.len());
+            }
             self.answers.push((q.light, Rgb::WHITE));
             self.queries.push(q);
         })
     }
 
+    /// [`ShadowBatch::add`], answering at once, without forming its ray,
+    /// a query toward a point light that a triangle the shadow cache of
+    /// `rays` held certainly stops (the argument is the private
+    /// `Certifier`'s): the answer the packets would give (any accepted
+    /// triangle met stops the ray), from the surface point alone. Inside
+    /// a large shadow that saves forming, preparing and testing the ray,
+    /// about 640 instructions a query.
+    /// Batches filled this way answer every query as with `add`, and
+    /// count the same rays cast; answer each batch once
+    /// ([`ShadowBatch::answer`]) before it is cleared.
+    #[inline(always)]
+    pub fn add_with(
+        &mut self,
+        ctx: &ShadeContext<'_>,
+        sp: &SurfacePoint,
+        d: Vec3,
+        rays: &ShadowRays<'_, '_>,
+    ) -> Vec3 {
+        // Only where every caster is an opaque triangle (then an answer is
+        // whether some accepted triangle meets the ray) and the cache held
+        // a triangle after the last answer: else as `add`.
+        if self.armed != 0 {
+            self.add_armed(ctx, sp, d, rays)
+        } else {
+            self.add(ctx, sp, d)
+        }
+    }
+
+    /// After `rays` answered a batch, which lights' certifiers
+    /// [`ShadowBatch::add_with`] tries in the next: where every caster is
+    /// an opaque triangle, each light whose shadow cache holds a triangle
+    /// (inside a shadow: the cache is cleared where a packet's last ray is
+    /// lit) and that has a certifier made with this structure. A light's
+    /// certifier is made here, for the cache's entry, where the light's
+    /// last certifier answered a query or the entry is the one of the last
+    /// answer too ([`CertifierSlot`]); one that cannot certify leaves the
+    /// light its last. (Which certifier is tried never changes an answer:
+    /// each certifies only what its own triangle stops.)
+    #[inline(always)]
+    fn arm(&mut self, rays: &ShadowRays<'_, '_>) {
+        self.armed = 0;
+        for slot in &mut self.certifiers {
+            slot.live = false;
+        }
+        if !rays.accel.opaque_triangles_only {
+            return;
+        }
+        let accel = rays.accel.id;
+        for o in &rays.occluders {
+            let entry = o.load(std::sync::atomic::Ordering::Relaxed);
+            // (`u64::MAX`, no entry, holds a light number far above.)
+            let Ok(light) = usize::try_from(entry >> 34) else {
+                continue;
+            };
+            if light >= CERTIFIED_LIGHTS {
+                continue;
+            }
+            if self.certifiers.len() <= light {
+                self.certifiers.resize(light + 1, CertifierSlot::default());
+            }
+            let slot = &mut self.certifiers[light];
+            if (slot.made_for != entry || slot.accel != accel)
+                && (slot.seen == entry || slot.productive())
+            {
+                // A new entry, worth a certifier: the last one answered a
+                // query, or this entry stayed the cache's over two answers
+                // (one that cannot certify keeps the light's last one).
+                if let Some(c) = Certifier::new(rays.accel.scene, light, entry) {
+                    slot.certifier = Some(c);
+                    slot.accel = accel;
+                    slot.answered = 0;
+                }
+                slot.made_for = entry;
+            }
+            slot.seen = entry;
+            slot.misses = 0;
+            slot.live = slot.certifier.is_some() && slot.accel == accel;
+            self.armed += usize::from(slot.live);
+        }
+    }
+
+    /// [`ShadowBatch::add_with`] where a light's certifier is live. (Out
+    /// of line, as [`ShadowBatch::add`] is by the compiler's choice:
+    /// inlined into the rasterizer's band loop it cost `polygons` 4 % more
+    /// instructions.)
+    #[inline(never)]
+    fn add_armed(
+        &mut self,
+        ctx: &ShadeContext<'_>,
+        sp: &SurfacePoint,
+        d: Vec3,
+        rays: &ShadowRays<'_, '_>,
+    ) -> Vec3 {
+        self.starts.push(self.answers.len());
+        rendiff_core::shade::shadow_queries_pending(ctx, sp, d, |p| {
+            if self.certifies(rays, p.index, sp) {
+                if self.certified == 0 {
+                    // Until now each query's answer had its own index.
+                    self.slots.extend(0..self.queries.len());
+                }
+                self.answers.push((p.index, Rgb::BLACK));
+                self.certified += 1;
+                return;
+            }
+            if self.certified != 0 {
+                self.slots.push(self.answers.len());
+            }
+            self.answers.push((p.index, Rgb::WHITE));
+            self.queries.push(p.form());
+        })
+    }
+
+    /// `true` when the certifier of `light`, live in this batch and made
+    /// with the structure of `rays`, says that its triangle stops the
+    /// shadow ray from `sp`. A miss ends its tries in this batch
+    /// ([`CERTIFIER_MISSES`]).
+    #[inline(always)]
+    fn certifies(&mut self, rays: &ShadowRays<'_, '_>, light: usize, sp: &SurfacePoint) -> bool {
+        let Some(slot) = self.certifiers.get_mut(light) else {
+            return false;
+        };
+        if !slot.live || slot.accel != rays.accel.id {
+            return false;
+        }
+        if slot.certifier.as_ref().is_some_and(|c| c.stops(sp)) {
+            slot.answered = slot.answered.saturating_add(1);
+            return true;
+        }
+        slot.misses += 1;
+        if slot.misses >= CERTIFIER_MISSES {
+            // The rest of the batch as `add`, where no light is left.
+            slot.live = false;
+            self.armed -= 1;
+        }
+        false
+    }
+
     /// Adds a sample that makes no shadow queries (a primary ray that
     /// missed), so that the batch's samples keep their callers' numbers.
     pub fn add_none(&mut self) {
-        self.starts.push(self.queries.len());
+        self.starts.push(self.answers.len());
+    }
+
+    /// Queries answered as they were added ([`ShadowBatch::add_with`])
+    /// since the last [`ShadowBatch::clear`].
+    #[must_use]
+    pub fn answered_as_added(&self) -> usize {
+        self.certified
     }
 
     /// Samples added since the last [`ShadowBatch::clear`].
@@ -974,6 +1384,22 @@ impl ShadowBatch {
     /// so a light's rays keep the samples' order, neighbours together) and
     /// traced in packets.
     pub fn answer(&mut self, rays: &ShadowRays<'_, '_>) {
+        self.answer_queries(rays);
+        self.arm(rays);
+    }
+
+    /// [`ShadowBatch::answer`]'s answers.
+    #[inline(always)]
+    fn answer_queries(&mut self, rays: &ShadowRays<'_, '_>) {
+        if self.certified != 0 {
+            // The queries answered as they were added are shadow rays too.
+            rays.cast.fetch_add(
+                u64::try_from(self.certified).unwrap_or(u64::MAX),
+                std::sync::atomic::Ordering::Relaxed,
+            );
+            self.answer_slots(rays);
+            return;
+        }
         let (queries, answers) = (&self.queries, &mut self.answers);
         if queries.iter().all(|q| q.light == queries[0].light) {
             // One light (or none): no grouping.
@@ -1011,6 +1437,36 @@ impl ShadowBatch {
         }
     }
 
+    /// [`ShadowBatch::answer`] of a batch with queries answered as they
+    /// were added: the others' answers go to their `slots`. (Apart, so
+    /// that a batch with none keeps the plain path.)
+    #[inline(never)]
+    fn answer_slots(&mut self, rays: &ShadowRays<'_, '_>) {
+        let (queries, answers, slots) = (&self.queries, &mut self.answers, &self.slots);
+        debug_assert_eq!(queries.len(), slots.len(), "a slot per query formed");
+        let mut light = queries.iter().map(|q| q.light).min();
+        while let Some(l) = light {
+            self.order.clear();
+            self.group.clear();
+            let mut next = None::<usize>;
+            for (k, q) in queries.iter().enumerate() {
+                if q.light == l {
+                    self.order.push(k);
+                    self.group.push(*q);
+                } else if q.light > l && next.is_none_or(|n| q.light < n) {
+                    next = Some(q.light);
+                }
+            }
+            self.group_answers.clear();
+            self.group_answers.resize(self.group.len(), Rgb::WHITE);
+            rays.transmittance_packets(&self.group, &mut self.group_answers);
+            for (&k, &t) in self.order.iter().zip(&self.group_answers) {
+                answers[slots[k]].1 = t;
+            }
+            light = next;
+        }
+    }
+
     /// The visibility that serves sample `k`'s answers to `shade` (any
     /// other query goes to `fallback`).
     #[must_use]
@@ -1019,7 +1475,7 @@ impl ShadowBatch {
             .starts
             .get(k + 1)
             .copied()
-            .unwrap_or(self.queries.len());
+            .unwrap_or(self.answers.len());
         Answered {
             answers: &self.answers[self.starts[k]..end],
             fallback,
@@ -1031,7 +1487,9 @@ impl ShadowBatch {
     pub fn clear(&mut self) {
         self.starts.clear();
         self.queries.clear();
+        self.slots.clear();
         self.answers.clear();
+        self.certified = 0;
     }
 }
 

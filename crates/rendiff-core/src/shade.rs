@@ -513,6 +513,21 @@ pub fn shadow_queries(
     d: Vec3,
     mut query: impl FnMut(ShadowQuery),
 ) -> Vec3 {
+    shadow_queries_pending(ctx, sp, d, |p| query(p.form()))
+}
+
+/// [`shadow_queries`] offering each query before it is formed: `pending`
+/// sees the light it goes to and forms it ([`PendingQuery::form`]) only
+/// where it needs the ray (a caller that can answer a query from the
+/// surface point alone skips the ray's setup). The same queries, in the
+/// same order; returns the shading normal.
+#[inline(always)]
+pub fn shadow_queries_pending(
+    ctx: &ShadeContext<'_>,
+    sp: &SurfacePoint,
+    d: Vec3,
+    mut pending: impl FnMut(PendingQuery<'_>),
+) -> Vec3 {
     let m = &ctx.materials[usize::from(sp.material)];
     let n = shading_normal(m, sp, d);
     if !ctx.shadows {
@@ -523,9 +538,39 @@ pub fn shadow_queries(
         if n.dot(l) <= 0.0 || dist == 0.0 || light.shadowless {
             continue;
         }
-        query(shadow_query(i, light, sp, l, dist));
+        pending(PendingQuery {
+            index: i,
+            light,
+            sp,
+            l,
+            dist,
+        });
     }
     n
+}
+
+/// A shadow query [`shadow_queries_pending`] makes, not formed yet.
+#[derive(Clone, Copy, Debug)]
+pub struct PendingQuery<'a> {
+    /// The light's index.
+    pub index: usize,
+    /// The light.
+    pub light: &'a Light,
+    /// The surface point the ray leaves.
+    pub sp: &'a SurfacePoint,
+    /// Unit vector toward the light from `sp.p`, and the distance
+    /// ([`Light::toward`]).
+    l: Vec3,
+    dist: f32,
+}
+
+impl PendingQuery<'_> {
+    /// The query, exactly as [`shadow_queries`] gives it.
+    #[must_use]
+    #[inline(always)]
+    pub fn form(&self) -> ShadowQuery {
+        shadow_query(self.index, self.light, self.sp, self.l, self.dist)
+    }
 }
 
 /// A [`Visibility`] that answers from a list of queries answered before

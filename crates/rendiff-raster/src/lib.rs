@@ -1213,7 +1213,7 @@ fn shade_pass(
                     band.set(sx, 0, Sample::hit(shaded.local, depth, tri, shaded.flags));
                     continue;
                 };
-                batch.push(&ctx, sx, tri, sp, ray.dir, depth);
+                batch.push(&ctx, sx, tri, sp, ray.dir, depth, r);
                 if batch.is_full() {
                     batch.shade(&ctx, r, |sx, s| band.set(sx, 0, s));
                 }
@@ -1271,6 +1271,13 @@ impl ShadeBatch {
     /// 16, either way.)
     const SIZE: usize = 16;
 
+    /// Adds a visible sample: its shadow queries, those the shadow cache's
+    /// triangle certainly stops answered at once
+    /// ([`ShadowBatch::add_with`]).
+    #[expect(
+        clippy::too_many_arguments,
+        reason = "one sample's values, as the band loop holds them"
+    )]
     fn push(
         &mut self,
         ctx: &shade::ShadeContext<'_>,
@@ -1279,8 +1286,9 @@ impl ShadeBatch {
         sp: shade::SurfacePoint,
         dir: rendiff_core::math::Vec3,
         depth: f64,
+        rays: &ShadowRays<'_, '_>,
     ) {
-        let n = self.shadows.add(ctx, &sp, dir);
+        let n = self.shadows.add_with(ctx, &sp, dir, rays);
         self.samples.push((sx, tri, sp, dir, n, depth));
     }
 

@@ -328,7 +328,7 @@ fn render_with(
                         for k in 0..n {
                             prepared[k] = hits[k].map(|hit| {
                                 let p = tracer.prepare(&rays[k], hit, &mut w.last);
-                                let n = batch.add(&tracer.ctx, &p.0, p.2);
+                                let n = batch.add_with(&tracer.ctx, &p.0, p.2, &w.vis);
                                 (p, n)
                             });
                             if prepared[k].is_none() {
