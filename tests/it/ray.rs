@@ -1982,3 +1982,212 @@ fn batches_answer_alike_with_and_without_answers_as_added() {
         "{certified} of {blocked} blocked queries answered as added"
     );
 }
+
+/// A batch primed with `primes` (answered three times, so that the cache
+/// holds its stopper and a certifier is made), then `tests` added with
+/// `add_with`: their answers, and the single-ray walk's for the same
+/// queries.
+fn answers_as_added_and_walked(
+    scene: &TriScene,
+    primes: &[(rendiff::shade::SurfacePoint, Vec3)],
+    tests: &[(rendiff::shade::SurfacePoint, Vec3)],
+) -> (Vec<rendiff::color::Rgb>, Vec<rendiff::color::Rgb>) {
+    use rendiff::accel::ShadowBatch;
+    use rendiff::shade::ShadowQuery;
+    let accel = Accel::new(scene, AccelOptions::default());
+    let rays = ShadowRays::new(&accel);
+    let ctx = scene.shade_context(0.0, true);
+    let mut batch = ShadowBatch::default();
+    for _ in 0..3 {
+        for (sp, d) in primes {
+            let _ = batch.add_with(&ctx, sp, *d, &rays);
+        }
+        batch.answer(&rays);
+        batch.clear();
+    }
+    for (sp, d) in tests {
+        let _ = batch.add_with(&ctx, sp, *d, &rays);
+    }
+    batch.answer(&rays);
+    let mut with = Vec::new();
+    for k in 0..batch.len() {
+        with.extend(batch.answered(k, &rays).answers.iter().map(|a| a.1));
+    }
+    let mut queries: Vec<ShadowQuery> = Vec::new();
+    for (sp, d) in tests {
+        let _ = rendiff::shade::shadow_queries(&ctx, sp, *d, |q| queries.push(q));
+    }
+    (
+        with,
+        queries.iter().map(|q| rays.transmittance(q)).collect(),
+    )
+}
+
+/// The review's case against the first form of the certifier: slivers
+/// (aspect 10⁻⁷ to 10⁻⁶, no edge short) over a floor point at the origin
+/// itself, where the ray's hit lies within the `f64` test's `δt` (which
+/// grows as `1/det`): the test rejects it, and the first form, bounding
+/// `δt` by `10⁻⁹·S`, answered black. Every answer must be the walk's.
+#[test]
+fn slivers_hit_within_their_delta_t_are_not_answered_as_added() {
+    use rendiff::math::Bary;
+    use rendiff::shade::{Light, LightKind};
+    let (mut lit, mut cases) = (0, 0);
+    for k in 3..8 {
+        let a = 2f32.powi(-k);
+        for w in [2e-6f32, 1e-6, 5e-7, 2e-7, 1e-7] {
+            let e = 2f32.powi(-23);
+            let sliver = [
+                Vec3::new(-a, -a, -w / 2.0),
+                Vec3::new(1.0, 1.0 + e, -w / 2.0),
+                Vec3::new(0.0, 0.0, w / 2.0),
+            ];
+            let floor = [
+                Vec3::new(-4.0, 0.0, -4.0),
+                Vec3::new(-4.0, 0.0, 4.0),
+                Vec3::new(4.0, 0.0, 0.0),
+            ];
+            let mut scene = TriScene::from_triangles(camera(), &[floor, sliver]);
+            scene.lights.push(Light {
+                kind: LightKind::Point {
+                    position: Vec3::new(0.0, 1.0, 0.0),
+                },
+                color: rendiff::color::Rgb::WHITE,
+                shadowless: false,
+                fade: None,
+            });
+            let test = scene.surface_at(0, Bary([0.25, 0.25, 0.5]));
+            let prime = scene.surface_at(0, Bary([0.218_75, 0.218_75, 0.5625]));
+            let (with, walked) =
+                answers_as_added_and_walked(&scene, &[(prime, -Vec3::Y)], &[(test, -Vec3::Y)]);
+            assert_eq!(with, walked, "a = 2^-{k}, w = {w:e}");
+            cases += 1;
+            lit += walked
+                .iter()
+                .filter(|&&t| t == rendiff::color::Rgb::WHITE)
+                .count();
+        }
+    }
+    // The hazard is there: the walk finds most of these rays lit.
+    assert!(lit * 3 > cases, "{lit} of {cases} lit");
+}
+
+/// One `ShadowBatch` used as a caller might: samples of two different
+/// structures (scenes) in turn, eight lights (a parallel one and seven
+/// point lights, so that lights share the cache's slots), samples with no
+/// query (`add_none`), batches answered twice and cleared unanswered. Its
+/// answers and the rays cast are those of a batch filled with `add`.
+#[test]
+fn a_reused_batch_answers_as_added_as_the_plain_one() {
+    use rendiff::accel::ShadowBatch;
+    use rendiff::color::Rgb;
+    use rendiff::math::Bary;
+    use rendiff::shade::{Light, LightKind};
+    let quad = |a: Vec3, b: Vec3, c: Vec3, d: Vec3| [[a, b, c], [a, c, d]];
+    let make = |shift: f32| {
+        let mut tris: Vec<[Vec3; 3]> = Vec::new();
+        tris.extend(quad(
+            Vec3::new(-4.0, 0.0, -4.0),
+            Vec3::new(-4.0, 0.0, 4.0),
+            Vec3::new(4.0, 0.0, 4.0),
+            Vec3::new(4.0, 0.0, -4.0),
+        ));
+        tris.extend(quad(
+            Vec3::new(-1.0 + shift, 1.0, -1.0),
+            Vec3::new(-1.0 + shift, 1.0, 1.0),
+            Vec3::new(1.0 + shift, 1.0, 1.0),
+            Vec3::new(1.0 + shift, 1.0, -1.0),
+        ));
+        for i in 0..6 {
+            for j in 0..6 {
+                let (x, z) = (0.5 + 0.5 * i as f32 - shift, -1.5 + 0.5 * j as f32);
+                tris.extend(quad(
+                    Vec3::new(x, 2.0, z),
+                    Vec3::new(x, 2.0, z + 0.4),
+                    Vec3::new(x + 0.4, 2.0, z + 0.4),
+                    Vec3::new(x + 0.4, 2.0, z),
+                ));
+            }
+        }
+        let mut scene = TriScene::from_triangles(camera(), &tris);
+        let mut kinds = vec![LightKind::Parallel {
+            direction: -Vec3::new(0.15, 1.0, 0.1).normalize(),
+        }];
+        for k in 0..7 {
+            let k = k as f32;
+            kinds.push(LightKind::Point {
+                position: Vec3::new(0.3 + 0.2 * k, 5.0 - 0.3 * k, 0.2 - 0.1 * k),
+            });
+        }
+        for kind in kinds {
+            scene.lights.push(Light {
+                kind,
+                color: Rgb::WHITE,
+                shadowless: false,
+                fade: None,
+            });
+        }
+        scene
+    };
+    let scenes = [make(0.0), make(1.7)];
+    let accels: Vec<Accel> = scenes
+        .iter()
+        .map(|s| Accel::new(s, AccelOptions::default()))
+        .collect();
+    let with_rays: Vec<ShadowRays> = accels.iter().map(ShadowRays::new).collect();
+    let plain_rays: Vec<ShadowRays> = accels.iter().map(ShadowRays::new).collect();
+    let ctxs: Vec<_> = scenes.iter().map(|s| s.shade_context(0.0, true)).collect();
+    let (mut with, mut plain) = (ShadowBatch::default(), ShadowBatch::default());
+    let mut rng = Rng(0x1234_5678);
+    let (mut x, mut answered, mut certified) = (0usize, false, 0usize);
+    let down = Vec3::new(0.05, -1.0, 0.02).normalize();
+    for _ in 0..60_000 {
+        let r = rng.below(100);
+        if r < 60 {
+            let px = rng.rangef(-3.0, 3.0);
+            let pz = rng.rangef(-3.0, 3.0);
+            let (tri, b) = if pz >= px {
+                (
+                    0,
+                    Bary([(4.0 - pz) / 8.0, (pz - px) / 8.0, (px + 4.0) / 8.0]),
+                )
+            } else {
+                (
+                    1,
+                    Bary([(4.0 - px) / 8.0, (pz + 4.0) / 8.0, (px - pz) / 8.0]),
+                )
+            };
+            let sp = scenes[x].surface_at(tri, b);
+            let _ = with.add_with(&ctxs[x], &sp, down, &with_rays[x]);
+            let _ = plain.add(&ctxs[x], &sp, down);
+            answered = false;
+        } else if r < 66 {
+            with.add_none();
+            plain.add_none();
+        } else if r < 90 || (r < 92 && answered) {
+            // (Between 90 and 92: a batch answered again.)
+            certified += with.answered_as_added();
+            with.answer(&with_rays[x]);
+            plain.answer(&plain_rays[x]);
+            answered = true;
+            assert_eq!(with.len(), plain.len());
+            for k in 0..plain.len() {
+                let (a, b) = (
+                    with.answered(k, &with_rays[x]),
+                    plain.answered(k, &plain_rays[x]),
+                );
+                assert_eq!(a.answers, b.answers, "sample {k}");
+            }
+        } else if r >= 92 {
+            with.clear();
+            plain.clear();
+            if rng.below(3) == 0 {
+                x = rng.below(2) as usize;
+            }
+        }
+    }
+    for (a, b) in with_rays.iter().zip(&plain_rays) {
+        assert_eq!(a.cast(), b.cast());
+    }
+    assert!(certified > 1000, "{certified} answered as added");
+}

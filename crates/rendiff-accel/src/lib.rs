@@ -780,7 +780,8 @@ impl Occluder {
 ///
 /// **Why its answer is the packets'.** A query's ray runs from the offset
 /// origin `o` (`offset_origin`: within `δ` of the surface point `P` on
-/// every axis, `δ` bounded below from `P`'s error bound and normal) to the
+/// every axis, `δ` bounded from `P`'s error bound and normal, of any
+/// sign or length) to the
 /// light `L`, and any accepted triangle but its skipped one that the `f64`
 /// test meets stops it. The triangle `T` here is accepted (the entry's
 /// `casts_on_point`: it casts, and its plane does not pass through `L`)
@@ -810,8 +811,17 @@ impl Occluder {
 /// `dist(o, plane_ij)·h_L³·|V_j − V_i|/|o − L|³ > 10⁻¹¹·S²` (125 times the
 /// error above); the three then agree, and `det`, their sum, is not zero.
 /// The test's distance is `|X − o| ≥ h_o` and it ends `|L − X| ≥ h_L`
-/// before `t_max = |L − o|`; both above `10⁻⁹·S` put the hit beyond the
-/// test's own bound `δt` (a few ulp of `6S`) and before its end. Every
+/// before `t_max = |L − o|`. The test accepts a hit beyond its own bound
+/// `δt`, which is under `1.05·10⁻¹²·S³/det` (pbrt-v4's, with the sheared
+/// coordinates under `4S` and `4S` and the scaled depths under `3.5S`),
+/// and its computed `t` errs by up to `δt`; `det`, twice the triangle's
+/// area in the ray's projection, is at least `|n_T|·cos θ ≥ |n_T|·h_L/|o −
+/// L|`. So `h_o·h_L·|n_T| > 10⁻¹¹·S³·|o − L|` and `h_L²·|n_T| >
+/// 10⁻¹¹·S³·|o − L|` put the hit beyond `2δt` and `2δt` before the end
+/// (a sliver's small `det` makes `δt` large: a review found a sliver of
+/// aspect 10⁻⁶ near the origin whose hit the test rejects, certified by
+/// the first form, which bounded `δt` by `10⁻⁹·S` alone); both are also
+/// kept above `10⁻⁹·S`. Every
 /// quantity is bounded conservatively: `dist(o, ·)` by the value at `P`
 /// less `δ` times the normal's 1-norm and `10⁻¹³` times the absolute
 /// products (the `f64` rounding of these few operations is under
@@ -931,12 +941,15 @@ impl Certifier {
             return false;
         }
         let p = to_f64(sp.p);
-        let spread = to_f64(sp.ng).abs().dot(to_f64(sp.p_error));
+        let ng = to_f64(sp.ng).abs();
+        // `offset_origin`'s `d` is this dot in `f32` (of either sign, if
+        // an error bound were negative), and its offset `ng·d`.
+        let spread = ng.dot(to_f64(sp.p_error)).abs() * ng.max_element().max(1.0);
         let p_max = p.abs().max_element();
-        // |o − P| on every axis: the offset (`ng·d` with `d` the f32 dot,
-        // rounded) and its rounding and one-ulp bump (each under 2⁻²³ of
-        // the coordinate), with room.
-        let delta = 1.1 * spread + (p_max + spread) * (1.0 / f64::from(1u32 << 20));
+        // |o − P| on every axis: the offset and its rounding and one-ulp
+        // bump (each under 2⁻²³ of the coordinate, or 2⁻¹⁴⁹ among
+        // subnormals), with room.
+        let delta = 1.1 * spread + (p_max + spread) * (1.0 / f64::from(1u32 << 20)) + 1e-44;
         let s = p_max.max(self.scale) + delta;
         let d = p - self.light;
         let d_abs = d.abs();
@@ -951,9 +964,18 @@ impl Certifier {
         }
         let (n, n_abs, n1, n_len) = &self.normal;
         let q = p - self.v0;
+        // `|n|·h_o`, the origin's distance beyond the plane, bounded below.
         let beyond = n.dot(q) - CERTIFY_ROUNDING * n_abs.dot(q.abs()) - n1 * delta;
         let margin = 1e-9 * s;
-        self.h_light > margin && beyond > margin * n_len
+        // The test's `δt` is under `1.05·10⁻¹²·S³/det` and `det ≥ |n|·cos θ
+        // ≥ |n|·h_L/|o − L|`: the hit's `t` (at least `h_o`) and its
+        // distance from the end (at least `h_L`) must both exceed twice
+        // that (the computed `t` errs by up to `δt`), with room.
+        let room = 1e-11 * s * s * s * reach;
+        self.h_light > margin
+            && beyond > margin * n_len
+            && beyond * self.h_light > room
+            && self.h_light * self.h_light * n_len > room
     }
 }
 
@@ -1339,10 +1361,10 @@ impl ShadowBatch {
         let Some(slot) = self.certifiers.get_mut(light) else {
             return false;
         };
-        if !slot.live || slot.accel != rays.accel.id {
+        if !slot.live {
             return false;
         }
-        if slot.certifier.as_ref().is_some_and(|c| c.stops(sp)) {
+        if slot.accel == rays.accel.id && slot.certifier.as_ref().is_some_and(|c| c.stops(sp)) {
             slot.answered = slot.answered.saturating_add(1);
             return true;
         }
