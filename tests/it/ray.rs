@@ -1044,6 +1044,53 @@ fn skipping_the_own_triangle_changes_no_shadow() {
     );
 }
 
+/// The shadow tests' triangles: the floor `y = 0` over ±4 (triangles 0
+/// and 1, meeting on `x = z`), a large occluder at `y = 1` over ±1 moved
+/// by `shift` along x (2 and 3), and a `cells × cells` grid of quads of
+/// side `side` at `y = 2`, `pitch` apart from (0.5 − shift, −1.5).
+fn floor_occluder_grid(shift: f32, cells: u8, pitch: f32, side: f32) -> Vec<[Vec3; 3]> {
+    let quad = |a: Vec3, b: Vec3, c: Vec3, d: Vec3| [[a, b, c], [a, c, d]];
+    let mut tris: Vec<[Vec3; 3]> = Vec::new();
+    tris.extend(quad(
+        Vec3::new(-4.0, 0.0, -4.0),
+        Vec3::new(-4.0, 0.0, 4.0),
+        Vec3::new(4.0, 0.0, 4.0),
+        Vec3::new(4.0, 0.0, -4.0),
+    ));
+    tris.extend(quad(
+        Vec3::new(-1.0 + shift, 1.0, -1.0),
+        Vec3::new(-1.0 + shift, 1.0, 1.0),
+        Vec3::new(1.0 + shift, 1.0, 1.0),
+        Vec3::new(1.0 + shift, 1.0, -1.0),
+    ));
+    for i in 0..cells {
+        for j in 0..cells {
+            let (x, z) = (
+                0.5 + pitch * f32::from(i) - shift,
+                -1.5 + pitch * f32::from(j),
+            );
+            tris.extend(quad(
+                Vec3::new(x, 2.0, z),
+                Vec3::new(x, 2.0, z + side),
+                Vec3::new(x + side, 2.0, z + side),
+                Vec3::new(x + side, 2.0, z),
+            ));
+        }
+    }
+    tris
+}
+
+/// The surface point of [`floor_occluder_grid`]'s floor at `(x, z)`.
+fn floor_point(scene: &TriScene, x: f32, z: f32) -> rendiff::shade::SurfacePoint {
+    use rendiff::math::Bary;
+    let (tri, b) = if z >= x {
+        (0, Bary([(4.0 - z) / 8.0, (z - x) / 8.0, (x + 4.0) / 8.0]))
+    } else {
+        (1, Bary([(4.0 - x) / 8.0, (z + 4.0) / 8.0, (x - z) / 8.0]))
+    };
+    scene.surface_at(tri, b)
+}
+
 /// The shadow cache of `transmittance_packets` (the triangle that stopped
 /// a row's latest stopped ray, tried first and kept from call to call)
 /// answers every query as the single-ray walk does: rows of floor samples
@@ -1059,33 +1106,9 @@ fn the_shadow_cache_answers_as_the_walk() {
     use rendiff::accel::ShadowRays;
     use rendiff::color::Rgb;
     use rendiff::shade::{Light, LightKind, ShadowQuery};
-    let quad = |a: Vec3, b: Vec3, c: Vec3, d: Vec3| [[a, b, c], [a, c, d]];
-    let mut tris: Vec<[Vec3; 3]> = Vec::new();
-    // The floor (triangles 0 and 1), the large occluder at y = 1 (2, 3).
-    tris.extend(quad(
-        Vec3::new(-4.0, 0.0, -4.0),
-        Vec3::new(-4.0, 0.0, 4.0),
-        Vec3::new(4.0, 0.0, 4.0),
-        Vec3::new(4.0, 0.0, -4.0),
-    ));
-    tris.extend(quad(
-        Vec3::new(-1.0, 1.0, -1.0),
-        Vec3::new(-1.0, 1.0, 1.0),
-        Vec3::new(1.0, 1.0, 1.0),
-        Vec3::new(1.0, 1.0, -1.0),
-    ));
-    // A 12 × 12 grid of small quads at y = 2, with gaps between them.
-    for i in 0..12 {
-        for j in 0..12 {
-            let (x, z) = (0.5 + 0.25 * i as f32, -1.5 + 0.25 * j as f32);
-            tris.extend(quad(
-                Vec3::new(x, 2.0, z),
-                Vec3::new(x, 2.0, z + 0.2),
-                Vec3::new(x + 0.2, 2.0, z + 0.2),
-                Vec3::new(x + 0.2, 2.0, z),
-            ));
-        }
-    }
+    // The floor (triangles 0 and 1), the large occluder at y = 1 (2, 3),
+    // a 12 × 12 grid of small quads at y = 2 with gaps between them.
+    let tris = floor_occluder_grid(0.0, 12, 0.25, 0.2);
     let mut scene = TriScene::from_triangles(camera(), &tris);
     for position in [Vec3::new(0.3, 5.0, 0.2), Vec3::new(-2.5, 1.0, 0.5)] {
         scene.lights.push(Light {
@@ -1883,33 +1906,8 @@ fn queries_answered_as_added_are_the_walks() {
 fn batches_answer_alike_with_and_without_answers_as_added() {
     use rendiff::accel::ShadowBatch;
     use rendiff::color::Rgb;
-    use rendiff::math::Bary;
     use rendiff::shade::{Light, LightKind};
-    let quad = |a: Vec3, b: Vec3, c: Vec3, d: Vec3| [[a, b, c], [a, c, d]];
-    let mut tris: Vec<[Vec3; 3]> = Vec::new();
-    tris.extend(quad(
-        Vec3::new(-4.0, 0.0, -4.0),
-        Vec3::new(-4.0, 0.0, 4.0),
-        Vec3::new(4.0, 0.0, 4.0),
-        Vec3::new(4.0, 0.0, -4.0),
-    ));
-    tris.extend(quad(
-        Vec3::new(-1.0, 1.0, -1.0),
-        Vec3::new(-1.0, 1.0, 1.0),
-        Vec3::new(1.0, 1.0, 1.0),
-        Vec3::new(1.0, 1.0, -1.0),
-    ));
-    for i in 0..12 {
-        for j in 0..12 {
-            let (x, z) = (0.5 + 0.25 * i as f32, -1.5 + 0.25 * j as f32);
-            tris.extend(quad(
-                Vec3::new(x, 2.0, z),
-                Vec3::new(x, 2.0, z + 0.2),
-                Vec3::new(x + 0.2, 2.0, z + 0.2),
-                Vec3::new(x + 0.2, 2.0, z),
-            ));
-        }
-    }
+    let tris = floor_occluder_grid(0.0, 12, 0.25, 0.2);
     let mut scene = TriScene::from_triangles(camera(), &tris);
     for kind in [
         LightKind::Parallel {
@@ -1943,13 +1941,7 @@ fn batches_answer_alike_with_and_without_answers_as_added() {
             let n = 1 + rng.below(20) as usize;
             for _ in 0..n.min(96 - xi) {
                 let x = -2.0 + 0.057 * xi as f32;
-                // The floor's two triangles meet on x = z.
-                let (tri, b) = if z >= x {
-                    (0, Bary([(4.0 - z) / 8.0, (z - x) / 8.0, (x + 4.0) / 8.0]))
-                } else {
-                    (1, Bary([(4.0 - x) / 8.0, (z + 4.0) / 8.0, (x - z) / 8.0]))
-                };
-                let sp = scene.surface_at(tri, b);
+                let sp = floor_point(&scene, x, z);
                 let na = with.add_with(&ctx, &sp, down, &rays_a);
                 let nb = plain.add(&ctx, &sp, down);
                 assert_eq!(
@@ -2081,34 +2073,9 @@ fn slivers_hit_within_their_delta_t_are_not_answered_as_added() {
 fn a_reused_batch_answers_as_added_as_the_plain_one() {
     use rendiff::accel::ShadowBatch;
     use rendiff::color::Rgb;
-    use rendiff::math::Bary;
     use rendiff::shade::{Light, LightKind};
-    let quad = |a: Vec3, b: Vec3, c: Vec3, d: Vec3| [[a, b, c], [a, c, d]];
     let make = |shift: f32| {
-        let mut tris: Vec<[Vec3; 3]> = Vec::new();
-        tris.extend(quad(
-            Vec3::new(-4.0, 0.0, -4.0),
-            Vec3::new(-4.0, 0.0, 4.0),
-            Vec3::new(4.0, 0.0, 4.0),
-            Vec3::new(4.0, 0.0, -4.0),
-        ));
-        tris.extend(quad(
-            Vec3::new(-1.0 + shift, 1.0, -1.0),
-            Vec3::new(-1.0 + shift, 1.0, 1.0),
-            Vec3::new(1.0 + shift, 1.0, 1.0),
-            Vec3::new(1.0 + shift, 1.0, -1.0),
-        ));
-        for i in 0..6 {
-            for j in 0..6 {
-                let (x, z) = (0.5 + 0.5 * i as f32 - shift, -1.5 + 0.5 * j as f32);
-                tris.extend(quad(
-                    Vec3::new(x, 2.0, z),
-                    Vec3::new(x, 2.0, z + 0.4),
-                    Vec3::new(x + 0.4, 2.0, z + 0.4),
-                    Vec3::new(x + 0.4, 2.0, z),
-                ));
-            }
-        }
+        let tris = floor_occluder_grid(shift, 6, 0.5, 0.4);
         let mut scene = TriScene::from_triangles(camera(), &tris);
         let mut kinds = vec![LightKind::Parallel {
             direction: -Vec3::new(0.15, 1.0, 0.1).normalize(),
@@ -2144,20 +2111,8 @@ fn a_reused_batch_answers_as_added_as_the_plain_one() {
     for _ in 0..60_000 {
         let r = rng.below(100);
         if r < 60 {
-            let px = rng.rangef(-3.0, 3.0);
-            let pz = rng.rangef(-3.0, 3.0);
-            let (tri, b) = if pz >= px {
-                (
-                    0,
-                    Bary([(4.0 - pz) / 8.0, (pz - px) / 8.0, (px + 4.0) / 8.0]),
-                )
-            } else {
-                (
-                    1,
-                    Bary([(4.0 - px) / 8.0, (pz + 4.0) / 8.0, (px - pz) / 8.0]),
-                )
-            };
-            let sp = scenes[x].surface_at(tri, b);
+            let (px, pz) = (rng.rangef(-3.0, 3.0), rng.rangef(-3.0, 3.0));
+            let sp = floor_point(&scenes[x], px, pz);
             let _ = with.add_with(&ctxs[x], &sp, down, &with_rays[x]);
             let _ = plain.add(&ctxs[x], &sp, down);
             answered = false;

@@ -1410,26 +1410,32 @@ impl ShadowBatch {
         self.arm(rays);
     }
 
-    /// [`ShadowBatch::answer`]'s answers.
+    /// [`ShadowBatch::answer`]'s answers: each formed query's goes to its
+    /// own index of `answers`, or, once a query was answered as it was
+    /// added, to its slot.
     #[inline(always)]
     fn answer_queries(&mut self, rays: &ShadowRays<'_, '_>) {
-        if self.certified != 0 {
+        let slotted = self.certified != 0;
+        if slotted {
             // The queries answered as they were added are shadow rays too.
             rays.cast.fetch_add(
                 u64::try_from(self.certified).unwrap_or(u64::MAX),
                 std::sync::atomic::Ordering::Relaxed,
             );
-            self.answer_slots(rays);
-            return;
         }
-        let (queries, answers) = (&self.queries, &mut self.answers);
+        let (queries, answers, slots) = (&self.queries, &mut self.answers, &self.slots);
+        debug_assert!(
+            !slotted || queries.len() == slots.len(),
+            "a slot per query formed"
+        );
+        let slot = |k: usize| if slotted { slots[k] } else { k };
         if queries.iter().all(|q| q.light == queries[0].light) {
             // One light (or none): no grouping.
             self.group_answers.clear();
             self.group_answers.resize(queries.len(), Rgb::WHITE);
             rays.transmittance_packets(queries, &mut self.group_answers);
-            for (a, &t) in answers.iter_mut().zip(&self.group_answers) {
-                a.1 = t;
+            for (k, &t) in self.group_answers.iter().enumerate() {
+                answers[slot(k)].1 = t;
             }
             return;
         }
@@ -1453,37 +1459,7 @@ impl ShadowBatch {
             self.group_answers.resize(self.group.len(), Rgb::WHITE);
             rays.transmittance_packets(&self.group, &mut self.group_answers);
             for (&k, &t) in self.order.iter().zip(&self.group_answers) {
-                answers[k].1 = t;
-            }
-            light = next;
-        }
-    }
-
-    /// [`ShadowBatch::answer`] of a batch with queries answered as they
-    /// were added: the others' answers go to their `slots`. (Apart, so
-    /// that a batch with none keeps the plain path.)
-    #[inline(never)]
-    fn answer_slots(&mut self, rays: &ShadowRays<'_, '_>) {
-        let (queries, answers, slots) = (&self.queries, &mut self.answers, &self.slots);
-        debug_assert_eq!(queries.len(), slots.len(), "a slot per query formed");
-        let mut light = queries.iter().map(|q| q.light).min();
-        while let Some(l) = light {
-            self.order.clear();
-            self.group.clear();
-            let mut next = None::<usize>;
-            for (k, q) in queries.iter().enumerate() {
-                if q.light == l {
-                    self.order.push(k);
-                    self.group.push(*q);
-                } else if q.light > l && next.is_none_or(|n| q.light < n) {
-                    next = Some(q.light);
-                }
-            }
-            self.group_answers.clear();
-            self.group_answers.resize(self.group.len(), Rgb::WHITE);
-            rays.transmittance_packets(&self.group, &mut self.group_answers);
-            for (&k, &t) in self.order.iter().zip(&self.group_answers) {
-                answers[slots[k]].1 = t;
+                answers[slot(k)].1 = t;
             }
             light = next;
         }

@@ -554,10 +554,8 @@ pub fn shadow_queries_pending(
 pub struct PendingQuery<'a> {
     /// The light's index.
     pub index: usize,
-    /// The light.
-    pub light: &'a Light,
-    /// The surface point the ray leaves.
-    pub sp: &'a SurfacePoint,
+    light: &'a Light,
+    sp: &'a SurfacePoint,
     /// Unit vector toward the light from `sp.p`, and the distance
     /// ([`Light::toward`]).
     l: Vec3,
