@@ -1975,6 +1975,181 @@ fn batches_answer_alike_with_and_without_answers_as_added() {
     );
 }
 
+/// A batch holds each query as `PendingQuery::form_segment` gives it
+/// (the direction and distance from the surface point, not from the
+/// offset origin: the tracer follows a point light's segment from the
+/// origin to the light itself), and must answer it as the single-ray walk
+/// answers the query `form` gives: the floor, a large occluder and a grid
+/// of small ones; point lights above, 10⁻³⁰ and 10⁻⁹ above the floor,
+/// in the occluder's plane, 10¹⁹ and 10³⁰ away, and one placed exactly at
+/// the offset origin of a sample on a tilted triangle, with a blocker just
+/// beyond it (there the segment is empty, the walk follows the query's own
+/// direction and distance, and one that ran on would be black), and a
+/// parallel light; samples on every triangle, seen from either side, in
+/// batches of 1 to 20, with plain `add` and with `add_with`.
+/// The two forms must agree bit for bit in all but a point light's
+/// `dir` and `t_max`, and in those too where the origin is the light.
+#[test]
+fn segment_queries_answer_as_formed_ones() {
+    use rendiff::accel::ShadowBatch;
+    use rendiff::color::Rgb;
+    use rendiff::math::Bary;
+    use rendiff::shade::{Light, LightKind, ShadowQuery};
+    let bits = |q: &ShadowQuery| {
+        (
+            q.light,
+            q.origin.to_array().map(f32::to_bits),
+            q.dir.to_array().map(f32::to_bits),
+            q.t_max.to_bits(),
+            q.normal.to_array().map(f32::to_bits),
+            q.leaves,
+        )
+    };
+    let mut tris = floor_occluder_grid(0.0, 6, 0.4, 0.3);
+    // A tilted triangle, whose points' offset is not zero (the floor's
+    // and the occluders' lie exactly in their planes).
+    tris.push([
+        Vec3::new(-3.5, 0.2, 3.0),
+        Vec3::new(-2.0, 0.9, 3.5),
+        Vec3::new(-2.8, 0.4, 2.2),
+    ]);
+    let tilted = (tris.len() - 1) as u32;
+    let bary = Bary([0.31, 0.27, 0.42]);
+    let mut scene = TriScene::from_triangles(camera(), &tris);
+    let at = scene.surface_at(tilted, bary);
+    // The offset origin of a sample on it toward a light along its
+    // normal: a light placed there exactly.
+    let mut origin = None;
+    scene.lights.push(Light {
+        kind: LightKind::Point {
+            position: at.p + at.ng,
+        },
+        color: Rgb::WHITE,
+        shadowless: false,
+        fade: None,
+    });
+    let ctx = scene.shade_context(0.0, true);
+    let _ = rendiff::shade::shadow_queries_pending(&ctx, &at, -at.ng, |p| {
+        origin = Some(p.form().origin);
+    });
+    let origin = origin.expect("a query toward the light along the normal");
+    // A blocker half a unit beyond that light, seen from the sample (the
+    // origin's rounding, not the normal, sets the direction): a query
+    // from the light itself that ran on past it would meet it.
+    let l = (origin - at.p).normalize();
+    let c = origin + 0.5 * l;
+    let (u, v) = (
+        l.any_orthonormal_vector(),
+        l.cross(l.any_orthonormal_vector()),
+    );
+    tris.push([c - 0.2 * u - 0.2 * v, c + 0.3 * u, c + 0.3 * v]);
+    let mut scene = TriScene::from_triangles(camera(), &tris);
+    assert_eq!(
+        format!("{:?}", scene.surface_at(tilted, bary)),
+        format!("{at:?}")
+    );
+    for kind in [
+        LightKind::Point {
+            position: Vec3::new(0.3, 5.0, 0.2),
+        },
+        LightKind::Point {
+            position: Vec3::new(-2.5, 1e-30, 0.5),
+        },
+        LightKind::Point {
+            position: Vec3::new(2.2, 1e-9, -1.7),
+        },
+        LightKind::Point {
+            position: Vec3::new(-3.0, 1.0, 0.4),
+        },
+        LightKind::Point {
+            position: Vec3::new(4e18, 1e19, -3e18),
+        },
+        LightKind::Point {
+            position: Vec3::new(1e30, 2e30, 5e29),
+        },
+        LightKind::Point { position: origin },
+        LightKind::Parallel {
+            direction: -Vec3::new(0.15, 1.0, 0.1).normalize(),
+        },
+    ] {
+        scene.lights.push(Light {
+            kind,
+            color: Rgb::WHITE,
+            shadowless: false,
+            fade: None,
+        });
+    }
+    let accel = Accel::new(&scene, AccelOptions::default());
+    let rays = ShadowRays::new(&accel);
+    let ctx = scene.shade_context(0.0, true);
+    let mut rng = Rng(0x5e97_e47f_0a11);
+    let (mut with, mut plain) = (ShadowBatch::default(), ShadowBatch::default());
+    let (mut queries, mut blocked, mut at_light) = (0usize, 0usize, 0usize);
+    for round in 0..300 {
+        let n = 1 + rng.below(20) as usize;
+        let mut samples = Vec::new();
+        for _ in 0..n {
+            let sp = match rng.below(4) {
+                0 => at,
+                1 => scene.surface_at(
+                    rng.below(tris.len() as u64) as u32,
+                    Bary({
+                        let b = [
+                            rng.rangef(0.0, 1.0),
+                            rng.rangef(0.0, 1.0),
+                            rng.rangef(0.0, 1.0),
+                        ];
+                        let s = b[0] + b[1] + b[2];
+                        b.map(|x| x / s)
+                    }),
+                ),
+                _ => floor_point(&scene, rng.rangef(-3.9, 3.9), rng.rangef(-3.9, 3.9)),
+            };
+            let d = match rng.below(8) {
+                0 => sp.ng,
+                _ => -sp.ng,
+            };
+            let _ = rendiff::shade::shadow_queries_pending(&ctx, &sp, d, |p| {
+                let (formed, segment) = (p.form(), p.form_segment());
+                let same_origin = formed.origin == origin && p.index == 6;
+                at_light += usize::from(same_origin);
+                if p.index == 7 || same_origin {
+                    assert_eq!(bits(&formed), bits(&segment), "light {}", p.index);
+                } else {
+                    let (f, s) = (bits(&formed), bits(&segment));
+                    assert_eq!((f.0, f.1, f.4, f.5), (s.0, s.1, s.4, s.5));
+                }
+            });
+            let _ = with.add_with(&ctx, &sp, d, &rays);
+            let _ = plain.add(&ctx, &sp, d);
+            samples.push((sp, d));
+        }
+        with.answer(&rays);
+        plain.answer(&rays);
+        let mut formed: Vec<ShadowQuery> = Vec::new();
+        for (sp, d) in &samples {
+            let _ = rendiff::shade::shadow_queries(&ctx, sp, *d, |q| formed.push(q));
+        }
+        let want: Vec<Rgb> = formed.iter().map(|q| rays.transmittance(q)).collect();
+        for batch in [&with, &plain] {
+            let mut got = Vec::new();
+            for k in 0..batch.len() {
+                got.extend(batch.answered(k, &rays).answers.iter().map(|a| a.1));
+            }
+            assert_eq!(got, want, "round {round}");
+        }
+        queries += want.len();
+        blocked += want.iter().filter(|&&t| t == Rgb::BLACK).count();
+        with.clear();
+        plain.clear();
+    }
+    assert!(
+        blocked * 10 > queries && blocked * 10 < queries * 9,
+        "{blocked} of {queries} blocked"
+    );
+    assert!(at_light > 100, "{at_light} queries from the light itself");
+}
+
 /// A batch primed with `primes` (answered three times, so that the cache
 /// holds its stopper and a certifier is made), then `tests` added with
 /// `add_with`: their answers, and the single-ray walk's for the same

@@ -1231,12 +1231,12 @@ impl ShadowBatch {
     /// normal for [`rendiff_core::shade::shade_with_normal`].
     pub fn add(&mut self, ctx: &ShadeContext<'_>, sp: &SurfacePoint, d: Vec3) -> Vec3 {
         self.starts.push(self.answers.len());
-        rendiff_core::shade::shadow_queries(ctx, sp, d, |q| {
+        rendiff_core::shade::shadow_queries_pending(ctx, sp, d, |p| {
             if self.certified != 0 {
                 self.slots.push(self.answers.len());
             }
-            self.answers.push((q.light, Rgb::WHITE));
-            self.queries.push(q);
+            self.answers.push((p.index, Rgb::WHITE));
+            self.queries.push(p.form_segment());
         })
     }
 
@@ -1348,7 +1348,7 @@ impl ShadowBatch {
                 self.slots.push(self.answers.len());
             }
             self.answers.push((p.index, Rgb::WHITE));
-            self.queries.push(p.form());
+            self.queries.push(p.form_segment());
         })
     }
 

@@ -569,6 +569,33 @@ impl PendingQuery<'_> {
     pub fn form(&self) -> ShadowQuery {
         shadow_query(self.index, self.light, self.sp, self.l, self.dist)
     }
+
+    /// The query for a tracer that follows a point light's shadow ray as
+    /// the segment from its origin to the light's position, whenever the
+    /// two differ (as `rendiff-accel` does, in `f64`): `origin`, `normal`
+    /// and `leaves` are [`PendingQuery::form`]'s, but `dir` and `t_max`
+    /// are the direction and distance from the surface point
+    /// ([`Light::toward`]) instead of from the origin. Such a tracer
+    /// reads them only where the origin is the light's position, and
+    /// there `form` gives these same values (its `f32` segment is empty);
+    /// toward a parallel light the query is `form`'s. The answers are
+    /// `form`'s without its normalisation, a square root and a division
+    /// on each query's path.
+    #[must_use]
+    #[inline(always)]
+    pub fn form_segment(&self) -> ShadowQuery {
+        ShadowQuery {
+            light: self.index,
+            origin: offset_origin(self.sp.p, self.sp.p_error, self.sp.ng, self.l),
+            dir: self.l,
+            t_max: match self.light.kind {
+                LightKind::Point { .. } => self.dist,
+                LightKind::Parallel { .. } => f32::INFINITY,
+            },
+            normal: self.sp.ng,
+            leaves: self.sp.prim,
+        }
+    }
 }
 
 /// A [`Visibility`] that answers from a list of queries answered before
