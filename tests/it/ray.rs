@@ -1981,12 +1981,14 @@ fn batches_answer_alike_with_and_without_answers_as_added() {
 /// origin to the light itself), and must answer it as the single-ray walk
 /// answers the query `form` gives: the floor, a large occluder and a grid
 /// of small ones; point lights above, 10⁻³⁰ and 10⁻⁹ above the floor,
-/// in the occluder's plane, 10¹⁹ and 10³⁰ away, and one placed exactly at
+/// in the occluder's plane and 10¹⁹ away (10³⁰, whose `f32` distance
+/// overflows, makes no query), and one placed exactly at
 /// the offset origin of a sample on a tilted triangle, with a blocker just
 /// beyond it (there the segment is empty, the walk follows the query's own
 /// direction and distance, and one that ran on would be black), and a
 /// parallel light; samples on every triangle, seen from either side, in
-/// batches of 1 to 20, with plain `add` and with `add_with`.
+/// batches of 1 to 20, with plain `add` and with `add_with`, through a
+/// structure with light buffers and one without.
 /// The two forms must agree bit for bit in all but a point light's
 /// `dir` and `t_max`, and in those too where the origin is the light.
 #[test]
@@ -2079,13 +2081,16 @@ fn segment_queries_answer_as_formed_ones() {
             fade: None,
         });
     }
-    let accel = Accel::new(&scene, AccelOptions::default());
-    let rays = ShadowRays::new(&accel);
+    // Batches through a structure with light buffers and one without;
+    // the answers wanted are the walks' without.
+    let (buffered, walked) = buffered_and_walked(&scene);
+    let walks = ShadowRays::new(&walked);
     let ctx = scene.shade_context(0.0, true);
     let mut rng = Rng(0x5e97_e47f_0a11);
     let (mut with, mut plain) = (ShadowBatch::default(), ShadowBatch::default());
     let (mut queries, mut blocked, mut at_light) = (0usize, 0usize, 0usize);
-    for round in 0..300 {
+    for round in 0..600 {
+        let rays = ShadowRays::new(if round % 2 == 0 { &buffered } else { &walked });
         let n = 1 + rng.below(20) as usize;
         let mut samples = Vec::new();
         for _ in 0..n {
@@ -2130,7 +2135,7 @@ fn segment_queries_answer_as_formed_ones() {
         for (sp, d) in &samples {
             let _ = rendiff::shade::shadow_queries(&ctx, sp, *d, |q| formed.push(q));
         }
-        let want: Vec<Rgb> = formed.iter().map(|q| rays.transmittance(q)).collect();
+        let want: Vec<Rgb> = formed.iter().map(|q| walks.transmittance(q)).collect();
         for batch in [&with, &plain] {
             let mut got = Vec::new();
             for k in 0..batch.len() {
