@@ -580,7 +580,9 @@ impl PendingQuery<'_> {
     /// there `form` gives these same values (its `f32` segment is empty);
     /// toward a parallel light the query is `form`'s. The answers are
     /// `form`'s without its normalisation, a square root and a division
-    /// on each query's path.
+    /// on each query's path. (Its own literal rather than a helper shared
+    /// with `shadow_query`: routing `shadow_query` through one changed its
+    /// code and cost `many_lights` 5 % wall time; ARCHITECTURE.md.)
     #[must_use]
     #[inline(always)]
     pub fn form_segment(&self) -> ShadowQuery {
