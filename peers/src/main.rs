@@ -832,47 +832,66 @@ fn trace_ms(stderr: &str) -> Option<f64> {
     Some(secs * 1e3)
 }
 
-/// Renders a reference with POV-Ray `repeats` times; the median trace time.
-fn povray_time(
-    job: &Prepared,
-    r: &golden::Reference,
+/// A reference written out for POV-Ray (its scene file and images in
+/// `work`), ready to render with [`PovRun::trace_ms`].
+struct PovRun<'a> {
+    pov: PathBuf,
+    dir: &'a Path,
+    size: (u32, u32),
     threads: usize,
-    repeats: usize,
-    work: &Path,
-) -> Result<f64> {
-    let pov = work.join(format!("{}{}.pov", job.scene.name(), r.variant.suffix()));
-    std::fs::write(&pov, &r.export.text)?;
-    for img in &r.export.images {
-        img.materialise(work)?;
+    work: &'a Path,
+}
+
+impl<'a> PovRun<'a> {
+    /// Writes the reference `r` of `job` into `work`.
+    fn new(
+        job: &'a Prepared,
+        r: &golden::Reference,
+        threads: usize,
+        work: &'a Path,
+    ) -> Result<PovRun<'a>> {
+        let pov = work.join(format!("{}{}.pov", job.scene.name(), r.variant.suffix()));
+        std::fs::write(&pov, &r.export.text)?;
+        for img in &r.export.images {
+            img.materialise(work)?;
+        }
+        let dir = job
+            .scene
+            .path
+            .parent()
+            .filter(|p| !p.as_os_str().is_empty())
+            .unwrap_or(Path::new("."));
+        Ok(PovRun {
+            pov,
+            dir,
+            size: r.export.render_size,
+            threads,
+            work,
+        })
     }
-    let dir = job
-        .scene
-        .path
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    let (w, h) = r.export.render_size;
-    let mut times = Vec::new();
-    for _ in 0..repeats {
+
+    /// Renders it once; POV-Ray's trace time.
+    fn trace_ms(&self) -> Result<f64> {
+        let (w, h) = self.size;
         let out = std::process::Command::new("povray")
-            .current_dir(dir)
-            .arg(format!("+I{}", pov.display()))
-            .arg(format!("+O{}", work.join("out.png").display()))
+            .current_dir(self.dir)
+            .arg(format!("+I{}", self.pov.display()))
+            .arg(format!("+O{}", self.work.join("out.png").display()))
             .arg(format!("+W{w}"))
             .arg(format!("+H{h}"))
             .args(["-D", "-A", "+FN16", "File_Gamma=1.0", "+Q9"])
-            .arg(format!("+WT{threads}"))
-            .arg(format!("+L{}", work.display()))
+            .arg(format!("+WT{}", self.threads))
+            .arg(format!("+L{}", self.work.display()))
             .output()
             .context("could not run povray (apt-get install povray)")?;
         let text = String::from_utf8_lossy(&out.stderr);
-        times.push(
-            trace_ms(&text).with_context(|| {
-                format!("no Trace Time in POV-Ray's output for {}", pov.display())
-            })?,
-        );
+        trace_ms(&text).with_context(|| {
+            format!(
+                "no Trace Time in POV-Ray's output for {}",
+                self.pov.display()
+            )
+        })
     }
-    Ok(median(times))
 }
 
 /// Share of pixels within 2/255 of the stored reference, in percent.
@@ -918,18 +937,33 @@ fn povray_cmp(scenes: &[PathBuf], threads: &[usize], repeats: usize) -> Result<P
                 let Some(r) = refs.iter().find(|r| r.variant == variant) else {
                     continue;
                 };
-                let pov_ms = povray_time(&job, r, n, repeats.min(3), &work)?;
+                let pov = PovRun::new(&job, r, n, &work)?;
                 let frame =
                     p.install(|| job.render_with_depth(backend, r.max_depth).unwrap().frame);
-                let ours = median(
-                    (0..repeats)
-                        .map(|_| {
-                            p.install(|| {
-                                job.render_with_depth(backend, r.max_depth).unwrap().time_ms
-                            })
-                        })
-                        .collect(),
-                );
+                // POV-Ray's runs (at most three: each starts a process and
+                // parses the scene) interleaved with ours, so that both
+                // medians come from the same minutes of a shared host,
+                // whose speed moves by a third within half an hour. After
+                // each POV-Ray run one render is untimed: ours are timed
+                // warm, as back to back (right after POV-Ray's process the
+                // caches hold its data, not ours), and POV-Ray's trace
+                // follows its own parse.
+                let pov_runs = repeats.clamp(1, 3);
+                let mut pov_times = Vec::with_capacity(pov_runs);
+                let mut our_times = Vec::with_capacity(repeats);
+                for i in 0..repeats.max(pov_runs) {
+                    if i < pov_runs {
+                        pov_times.push(pov.trace_ms()?);
+                        p.install(|| job.render_with_depth(backend, r.max_depth).unwrap());
+                    }
+                    if i < repeats {
+                        our_times.push(p.install(|| {
+                            job.render_with_depth(backend, r.max_depth).unwrap().time_ms
+                        }));
+                    }
+                }
+                let pov_ms = median(pov_times);
+                let ours = median(our_times);
                 let pct = within(&job, &frame, variant)
                     .map_or_else(|| "n/a".into(), |v| format!("{v:.3}"));
                 println!(
