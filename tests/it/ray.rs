@@ -1555,6 +1555,12 @@ fn the_light_buffer_answers_as_the_walk() {
             }
         }
         let (buffered, walked) = buffered_and_walked(&scene);
+        // Every light keeps its buffer (none is crowded enough to be
+        // dropped), so the answers below are the buffers'.
+        assert!(
+            (0..n_lights).all(|l| buffered.has_light_buffer(l)),
+            "a light lost its buffer: this test would compare the walk with itself"
+        );
         let (fast, slow) = (ShadowRays::new(&buffered), ShadowRays::new(&walked));
         let (mut blocked, mut lit, mut between) = (0usize, 0usize, 0usize);
         for run in queries.chunks(13) {
@@ -1615,6 +1621,69 @@ fn the_plan_shows_the_light_buffer_rule() {
         "{}",
         line("dense")
     );
+}
+
+/// A point light over a stack of sheets deeper than a cell's list keeps
+/// no light buffer (its rays would land in crowded cells and walk anyway,
+/// with a lookup added: `many_lights`), and over two sheets it keeps one;
+/// either way the answers are the walk's.
+#[test]
+fn a_light_over_a_deep_stack_keeps_no_buffer() {
+    use rendiff::color::Rgb;
+    use rendiff::shade::{Light, LightKind, ShadowQuery};
+    let quad = |y: f32, h: f32| {
+        let (a, b, c, d) = (
+            Vec3::new(-h, y, -h),
+            Vec3::new(-h, y, h),
+            Vec3::new(h, y, h),
+            Vec3::new(h, y, -h),
+        );
+        [[a, b, c], [a, c, d]]
+    };
+    let light = Vec3::new(0.0, 5.0, 0.0);
+    for (sheets, kept) in [(12, false), (2, true)] {
+        // Seen from the light (one cube face), the floor spans ±0.6 of
+        // the face and each sheet ±0.45: more than half of the grid's
+        // cells list the floor and every sheet (crowded), the rest the
+        // floor alone.
+        let mut tris: Vec<[Vec3; 3]> = quad(0.0, 3.0).to_vec();
+        for k in 0..sheets {
+            let y = 0.5 + 0.25 * k as f32;
+            tris.extend(quad(y, 0.45 * (5.0 - y)));
+        }
+        let mut scene = TriScene::from_triangles(camera(), &tris);
+        scene.lights.push(Light {
+            kind: LightKind::Point { position: light },
+            color: Rgb::WHITE,
+            shadowless: false,
+            fade: None,
+        });
+        let (buffered, walked) = buffered_and_walked(&scene);
+        assert_eq!(buffered.has_light_buffer(0), kept, "{sheets} sheets");
+        assert!(!walked.has_light_buffer(0), "no buffer without the rays");
+        let (fast, slow) = (ShadowRays::new(&buffered), ShadowRays::new(&walked));
+        let queries: Vec<ShadowQuery> = (0..64)
+            .map(|i| {
+                let origin = Vec3::new(-2.9 + 0.09 * i as f32, 0.0, 2.9 - 0.09 * i as f32);
+                let v = light - origin;
+                ShadowQuery {
+                    light: 0,
+                    origin,
+                    dir: v / v.length(),
+                    t_max: v.length(),
+                    normal: Vec3::Y,
+                    leaves: 0,
+                }
+            })
+            .collect();
+        let mut a = vec![Rgb::BLACK; queries.len()];
+        let mut b = vec![Rgb::BLACK; queries.len()];
+        fast.transmittance_packets(&queries, &mut a);
+        slow.transmittance_packets(&queries, &mut b);
+        assert_eq!(a, b, "{sheets} sheets");
+        // The floor under the sheets is in their shadow.
+        assert_eq!(a[32], Rgb::BLACK, "{sheets} sheets");
+    }
 }
 
 /// The structures of `scene` with a light buffer for every light (as

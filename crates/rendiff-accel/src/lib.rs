@@ -224,6 +224,17 @@ impl<'s> Accel<'s> {
         }
     }
 
+    /// Whether the shadow rays toward light `light` are answered through
+    /// a light buffer: one is built where
+    /// [`AccelOptions::shadow_rays_per_light`] pays for it
+    /// ([`rendiff_core::options::light_buffer_pays`]) and kept unless more
+    /// than a third of its listed cells are crowded (its rays would then
+    /// mostly walk, with a lookup added).
+    #[must_use]
+    pub fn has_light_buffer(&self, light: usize) -> bool {
+        self.light_buffers.has(light)
+    }
+
     /// The scene.
     #[must_use]
     pub fn scene(&self) -> &'s TriScene {

@@ -361,7 +361,7 @@ fn decide_light_buffer(scene: &TriScene, shadows: bool) -> Decision {
                 "{rays} camera samples per light for {casters} casting triangles ({} {per} per triangle: {})",
                 if on { "at or above" } else { "below" },
                 if on {
-                    "a grid of the triangles seen from each light answers most shadow rays without a walk"
+                    "a grid of the triangles seen from each light answers most shadow rays without a walk; a light whose grid is crowded is dropped after its build"
                 } else {
                     "its build would cost more than it saves"
                 }
