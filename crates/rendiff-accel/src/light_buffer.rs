@@ -472,6 +472,28 @@ impl LightBuffer {
                 }
             }
         }
+        // A grid more than a third of whose listed cells are crowded sends
+        // most rays to the walk with its lookup added (the rays leave the
+        // casters, so they land where the casters are listed): dropped,
+        // and every ray toward the light walks at once. The share is
+        // measured (ARCHITECTURE.md, the light buffer's "Crowded
+        // cells"): at most 0.21 in the scenes the buffer speeds up,
+        // 0.43–0.67 in `many_lights` (eight lights 1.1 above a 16-unit
+        // teapot), whose buffers cost 10.2 % more instructions than none.
+        // Decided from the counts, before the lists and leaves are made: a
+        // cell will be crowded (walked) where its count passes `cap`, and
+        // listed where it counts a triangle or the near list is not empty.
+        let (mut crowded, mut occupied) = (0usize, 0usize);
+        for &n in &counts {
+            crowded += usize::from(n > cap);
+            occupied += usize::from(n > 0);
+        }
+        if !near.is_empty() {
+            occupied = base;
+        }
+        if crowded * LB_CROWDED_SHARE.1 > occupied * LB_CROWDED_SHARE.0 {
+            return None;
+        }
         let mut start = Vec::with_capacity(base + 1);
         let mut total = 0usize;
         for &n in &counts {
@@ -502,14 +524,12 @@ impl LightBuffer {
         };
         let mut cells = vec![EMPTY_CELL; base];
         let mut list = Vec::with_capacity(MAX_LIST);
-        let mut walked = 0usize;
         for g in &grids {
             for y in 0..g.res[1] {
                 for x in 0..g.res[0] {
                     let c = g.base + y * g.res[0] + x;
                     if counts[c] > cap {
                         cells[c] = WALK_CELL;
-                        walked += 1;
                         continue;
                     }
                     let here = &listed[start[c]..start[c + 1]];
@@ -541,18 +561,6 @@ impl LightBuffer {
                     cells[c] = leaf;
                 }
             }
-        }
-        // A grid more than a third of whose listed cells are crowded sends
-        // most rays to the walk with its lookup added (the rays leave the
-        // casters, so they land where the casters are listed): dropped,
-        // and every ray toward the light walks at once. The share is
-        // measured (ARCHITECTURE.md, the light buffer's "Crowded
-        // cells"): at most 0.21 in the scenes the buffer speeds up,
-        // 0.43–0.67 in `many_lights` (eight lights 1.1 above a 16-unit
-        // teapot), whose buffers cost 10.2 % more instructions than none.
-        let listed = cells.iter().filter(|&&c| c != EMPTY_CELL).count();
-        if walked * LB_CROWDED_SHARE.1 > listed * LB_CROWDED_SHARE.0 {
-            return None;
         }
         Some(LightBuffer {
             shape,
