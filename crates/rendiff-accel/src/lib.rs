@@ -597,17 +597,14 @@ impl<'a, 's> ShadowRays<'a, 's> {
                 None => 0,
             };
             if cached == 0 {
-                a.bvh.any_packet(
-                    &rays[..m],
-                    &skips[..m],
-                    |k, id, _| {
-                        let stops = accept(k, id);
-                        if stops {
-                            stopper[k] = id;
-                        }
-                        stops
-                    },
-                    &mut blocked[..m],
+                // The whole packet, walked in place.
+                walk_some(
+                    &a.bvh,
+                    (&rays[..m], &skips[..m]),
+                    &WHOLE_PACKET[..m],
+                    &accept,
+                    &mut blocked,
+                    &mut stopper,
                 );
             } else if cached < m {
                 walk_rest(
@@ -1109,6 +1106,17 @@ fn walk_rest(
     }
     walk_some(bvh, rays, &of[..n], accept, blocked, stopper);
 }
+
+/// Every ray of a packet, as the `of` of [`walk_some`].
+const WHOLE_PACKET: [usize; bvh::PACKET] = {
+    let mut all = [0; bvh::PACKET];
+    let mut k = 0;
+    while k < bvh::PACKET {
+        all[k] = k;
+        k += 1;
+    }
+    all
+};
 
 /// The any-hit walk of the rays `of` of a packet (indices into `rays`,
 /// increasing) as a smaller packet: sets their `blocked` (and `stopper`
