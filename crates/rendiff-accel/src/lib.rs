@@ -1121,7 +1121,8 @@ const WHOLE_PACKET: [usize; bvh::PACKET] = {
 /// The any-hit walk of the rays `of` of a packet (indices into `rays`,
 /// increasing) as a smaller packet: sets their `blocked` (and `stopper`
 /// where stopped). Where `of` is the whole packet (every ray's light
-/// buffer cell crowded), the packet's own arrays are walked: gathering
+/// buffer cell crowded, or a packet the shadow cache stopped none of),
+/// the packet's own arrays are walked: gathering
 /// them cost `many_lights`, whose rays all land in crowded cells, 1.5 %
 /// more instructions (ARCHITECTURE.md, "Crowded cells").
 #[inline(always)]
